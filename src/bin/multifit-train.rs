@@ -1,0 +1,526 @@
+//! multifit-train: data generation, training, evaluation and cross-validation.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+use multifit::data::synthetic::{LceConfig, LceGenerator, LceVariant};
+use multifit::data::{Kind, Normalization, Sample, Sequence, load_sequences};
+use multifit::loss::Loss;
+use multifit::model::ModelConfig;
+use multifit::registry::{LoadedModel, MetricRecord, TrainingInfo, WEIGHTS_FILE};
+use multifit::train::cv::{self, CvSpec, Protocol};
+use multifit::train::eval::{EvalSettings, evaluate_sample, format_table, totals};
+use multifit::train::{EpochLog, Hooks, Schedule, TrainConfig, prepare, train};
+
+static STOP: AtomicBool = AtomicBool::new(false);
+
+/// Train, evaluate and cross-validate multifit models.
+#[derive(Parser, Debug)]
+#[command(version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Write synthetic LCE / LCE-Unmixed samples as dataset JSON files.
+    GenLce(GenLceArgs),
+    /// Train one model and write its directory (weights + model.json).
+    Train(TrainCmd),
+    /// Evaluate a model directory on a dataset.
+    Eval(EvalCmd),
+    /// Leave-one-sequence-out cross-validation.
+    Cv(CvCmd),
+}
+
+#[derive(Args, Debug)]
+struct GenLceArgs {
+    /// Output directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// Number of samples.
+    #[arg(long, default_value_t = 200)]
+    count: usize,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// mixed (line, 2 ellipses, circle) or unmixed (2-4 of one type).
+    #[arg(long, value_enum, default_value = "mixed")]
+    variant: VariantArg,
+    #[arg(long, default_value_t = 50)]
+    points_per_shape: usize,
+    /// Gaussian noise sigma on the unit-scale frame.
+    #[arg(long, default_value_t = 0.05)]
+    noise: f64,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum VariantArg {
+    Mixed,
+    Unmixed,
+}
+
+/// Data selection shared by train, eval and cv.
+#[derive(Args, Debug, Clone)]
+struct DataArgs {
+    /// Dataset directory or file (repeatable).
+    #[arg(long, required = true)]
+    data: Vec<PathBuf>,
+    /// Keep only AdelaideRMF sequences of this model type (homography or fundamental).
+    #[arg(long)]
+    model_type: Option<String>,
+    /// Frames per trajectory clip.
+    #[arg(long, default_value_t = 5)]
+    clip_len: usize,
+}
+
+/// Model and optimisation settings shared by train and cv.
+#[derive(Args, Debug, Clone)]
+struct TrainArgs {
+    /// l2, ce or mimi.
+    #[arg(long, default_value = "mimi")]
+    loss: String,
+    /// MIMI's weight of the inter-cluster term.
+    #[arg(long, default_value_t = 0.6)]
+    alpha: f64,
+    #[arg(long, default_value_t = 128)]
+    width: usize,
+    #[arg(long, default_value_t = 12)]
+    depth: usize,
+    /// Embedding dimension E (the paper: the largest number of structures).
+    #[arg(long, default_value_t = 6)]
+    embed_dim: usize,
+    /// BatchNorm after Context Normalization (CNe).
+    #[arg(long)]
+    batch_norm: bool,
+    #[arg(long, default_value_t = 1e-3)]
+    lr: f64,
+    #[arg(long, value_enum, default_value = "cosine")]
+    schedule: ScheduleArg,
+    #[arg(long, default_value_t = 100)]
+    epochs: usize,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Sets per step when they have equal size.
+    #[arg(long, default_value_t = 1)]
+    batch_size: usize,
+    /// Gaussian jitter sigma on normalised training inputs (0 = off).
+    #[arg(long, default_value_t = 0.0)]
+    jitter: f64,
+    /// Protocol for trajectory data: vanilla (first clip) or augment (all non-overlapping clips).
+    #[arg(long, value_enum, default_value = "vanilla")]
+    protocol: Protocol,
+    /// Largest K for automatic selection (stored in the card).
+    #[arg(long, default_value_t = 8)]
+    k_max: usize,
+}
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+enum ScheduleArg {
+    Constant,
+    Cosine,
+}
+
+#[derive(Args, Debug)]
+struct TrainCmd {
+    #[command(flatten)]
+    data: DataArgs,
+    #[command(flatten)]
+    train: TrainArgs,
+    /// Validation dataset (directory or file); the best epoch on it is kept.
+    #[arg(long)]
+    val: Option<PathBuf>,
+    /// Model name (the card's name).
+    #[arg(long)]
+    name: String,
+    /// Output model directory (default models/<name>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Directory for checkpoints and the JSONL log (default runs/<name>).
+    #[arg(long)]
+    run_dir: Option<PathBuf>,
+    /// Continue from the checkpoint in the run directory.
+    #[arg(long)]
+    resume: bool,
+    /// What the data is, for the model card.
+    #[arg(long, default_value = "")]
+    describe: String,
+}
+
+#[derive(Args, Debug)]
+struct EvalCmd {
+    /// Model directory.
+    #[arg(long)]
+    model: PathBuf,
+    #[command(flatten)]
+    data: DataArgs,
+    #[arg(long, default_value_t = 8)]
+    k_max: usize,
+    #[arg(long, default_value_t = 4)]
+    restarts: usize,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+    /// Record the known-K mean error in the model card under this metric name.
+    #[arg(long)]
+    record: Option<String>,
+}
+
+#[derive(Args, Debug)]
+struct CvCmd {
+    #[command(flatten)]
+    data: DataArgs,
+    #[command(flatten)]
+    train: TrainArgs,
+    /// Output directory (folds/<name>.json, summary.json).
+    #[arg(long)]
+    out: PathBuf,
+    /// Folds trained at once, each in its own one-thread process.
+    #[arg(long, default_value_t = 1)]
+    jobs: usize,
+    /// Run only this fold (used by --jobs; also handy by hand).
+    #[arg(long)]
+    fold: Option<String>,
+    #[arg(long, default_value_t = 4)]
+    restarts: usize,
+    #[arg(long)]
+    json: bool,
+}
+
+impl TrainArgs {
+    fn config(&self, input_dim: usize) -> Result<TrainConfig> {
+        let loss = Loss::parse(&self.loss, self.alpha).with_context(|| format!("unknown loss {:?} (l2, ce, mimi)", self.loss))?;
+        let config = TrainConfig {
+            model: ModelConfig {
+                input_dim,
+                width: self.width,
+                depth: self.depth,
+                embed_dim: self.embed_dim,
+                batch_norm: self.batch_norm,
+                cn_epsilon: 1e-3,
+            },
+            loss,
+            learning_rate: self.lr,
+            schedule: match self.schedule {
+                ScheduleArg::Constant => Schedule::Constant,
+                ScheduleArg::Cosine => Schedule::Cosine,
+            },
+            epochs: self.epochs,
+            seed: self.seed,
+            batch_size: self.batch_size,
+            jitter: self.jitter,
+        };
+        config.validate()?;
+        Ok(config)
+    }
+}
+
+impl DataArgs {
+    fn sequences(&self) -> Result<Vec<Sequence>> {
+        let mut all = Vec::new();
+        for path in &self.data {
+            all.extend(load_sequences(path, self.model_type.as_deref())?);
+        }
+        let kind = all[0].points.kind();
+        if let Some(s) = all.iter().find(|s| s.points.kind() != kind) {
+            bail!("{}: kind {} differs from {} of the other sequences", s.name, s.points.kind(), kind);
+        }
+        Ok(all)
+    }
+}
+
+fn command_line() -> String {
+    std::env::args().collect::<Vec<_>>().join(" ")
+}
+
+fn machine() -> String {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| t.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    format!("{cores} cores, {cpu}")
+}
+
+fn git_commit() -> Option<String> {
+    let out = std::process::Command::new("git").args(["rev-parse", "--short", "HEAD"]).output().ok()?;
+    out.status.success().then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+}
+
+fn progress(len: u64) -> ProgressBar {
+    let bar = ProgressBar::new(len);
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} epoch {prefix} [{bar:30}] {pos}/{len} {msg} eta {eta}")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    bar
+}
+
+fn gen_lce(a: GenLceArgs) -> Result<()> {
+    let config = LceConfig { points_per_shape: a.points_per_shape, noise: a.noise };
+    if config.points_per_shape < 2 || !(config.noise.is_finite() && config.noise >= 0.0) {
+        bail!("points per shape must be at least 2 and noise finite and non-negative");
+    }
+    let variant = match a.variant {
+        VariantArg::Mixed => LceVariant::Mixed,
+        VariantArg::Unmixed => LceVariant::Unmixed,
+    };
+    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
+    let mut generator = LceGenerator::new(a.seed, config);
+    let tag = match variant {
+        LceVariant::Mixed => "mixed",
+        LceVariant::Unmixed => "unmixed",
+    };
+    for i in 0..a.count {
+        let name = format!("lce-{tag}-s{}-{i:05}", a.seed);
+        let sample = generator.sample(variant, &name);
+        let path = a.out.join(format!("{name}.json"));
+        let text = serde_json::to_string(&sample.to_file(variant, a.seed, &config))?;
+        std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
+    }
+    println!("wrote {} {tag} samples to {}", a.count, a.out.display());
+    Ok(())
+}
+
+/// Training samples of a sequence list under a protocol.
+fn samples_of(seqs: &[Sequence], protocol: Protocol, clip_len: usize) -> Vec<Sample> {
+    seqs.iter().flat_map(|s| cv::train_samples(s, protocol, clip_len)).collect()
+}
+
+fn train_cmd(a: TrainCmd) -> Result<()> {
+    let seqs = a.data.sequences()?;
+    let kind = seqs[0].points.kind();
+    let train_samples = samples_of(&seqs, a.train.protocol, a.data.clip_len);
+    let val_samples = match &a.val {
+        Some(p) => {
+            let vs = load_sequences(p, a.data.model_type.as_deref())?;
+            vs.iter().filter_map(|s| cv::test_sample(s, a.data.clip_len)).collect()
+        }
+        None => vec![],
+    };
+    let input_dim = train_samples.first().context("no training samples")?.points.dim();
+    let config = a.train.config(input_dim)?;
+    let norm = Normalization::for_kind(kind);
+    let (train_set, val_set) = (prepare(&train_samples, norm), prepare(&val_samples, norm));
+    let out = a.out.clone().unwrap_or_else(|| Path::new("models").join(&a.name));
+    let run_dir = a.run_dir.clone().unwrap_or_else(|| Path::new("runs").join(&a.name));
+    std::fs::create_dir_all(&run_dir)?;
+    let log_path = run_dir.join("train.jsonl");
+    let mut log = std::fs::OpenOptions::new().create(true).append(true).open(&log_path)?;
+    eprintln!(
+        "training {} on {} samples ({} validation), {} epochs, {:?}",
+        a.name,
+        train_set.len(),
+        val_set.len(),
+        config.epochs,
+        config.loss
+    );
+    let bar = progress(train_set.len() as u64);
+    let mut on_epoch = |e: &EpochLog| {
+        use std::io::Write;
+        let _ = writeln!(log, "{}", serde_json::to_string(e).unwrap_or_default());
+        bar.println(format!(
+            "epoch {:>4} loss {:.5} val_err {} lr {:.2e} {:.1}s{}",
+            e.epoch,
+            e.train_loss,
+            e.val_error.map_or("-".into(), |v| format!("{:.2}%", 100.0 * v)),
+            e.learning_rate,
+            e.seconds,
+            if e.best { " *" } else { "" }
+        ));
+        bar.set_prefix(format!("{}/{}", e.epoch + 1, config.epochs));
+    };
+    let bar2 = bar.clone();
+    let mut on_step = |step: usize, total: usize| {
+        bar2.set_length(total as u64);
+        bar2.set_position(step as u64);
+    };
+    let hooks = Hooks {
+        stop: Some(&STOP),
+        on_epoch: Some(&mut on_epoch),
+        on_step: Some(&mut on_step),
+        checkpoint: Some(&run_dir),
+        resume: a.resume,
+    };
+    let outcome = train(&config, &train_set, &val_set, hooks)?;
+    bar.finish_and_clear();
+    let data = if a.describe.is_empty() {
+        format!(
+            "{} ({} sequences, {} training samples, protocol {:?}, clip {} frames)",
+            a.data.data.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "),
+            seqs.len(),
+            train_set.len(),
+            a.train.protocol,
+            a.data.clip_len
+        )
+    } else {
+        a.describe.clone()
+    };
+    let info = TrainingInfo {
+        data,
+        command: command_line(),
+        epochs: outcome.history.len(),
+        learning_rate: config.learning_rate,
+        seed: config.seed,
+        seconds: outcome.seconds,
+        machine: machine(),
+    };
+    let mut card = cv::card_for(&a.name, kind, &config, a.train.k_max, info);
+    card.git_commit = git_commit();
+    if let Some(v) = outcome.best_val_error {
+        card.metrics.push(MetricRecord {
+            name: "validation_error_known_k".into(),
+            value: v,
+            protocol: format!("mean error rate with known K on {} validation samples, best epoch {}", val_set.len(), outcome.best_epoch),
+            command: card.training.command.clone(),
+        });
+    }
+    card.write(&out).with_context(|| format!("{}: cannot write the card", out.display()))?;
+    outcome.net.save(&out.join(WEIGHTS_FILE))?;
+    println!(
+        "wrote {} (best epoch {}, {:.0} s{})",
+        out.display(),
+        outcome.best_epoch,
+        outcome.seconds,
+        if outcome.interrupted { ", interrupted" } else { "" }
+    );
+    Ok(())
+}
+
+fn eval_samples(seqs: &[Sequence], input_dim: usize) -> Vec<Sample> {
+    seqs.iter()
+        .filter_map(|s| match s.points.kind() {
+            Kind::Trajectories if s.points.dim() != input_dim => s.clip(0, input_dim / 2),
+            _ => Some(s.sample()),
+        })
+        .collect()
+}
+
+fn eval_cmd(a: EvalCmd) -> Result<()> {
+    let model = LoadedModel::load(&a.model)?;
+    let seqs = a.data.sequences()?;
+    let samples = eval_samples(&seqs, model.card.input_dim);
+    let settings = EvalSettings { k_max: a.k_max, restarts: a.restarts, seed: a.seed };
+    let mut rows = Vec::new();
+    for s in &samples {
+        rows.push(evaluate_sample(&model, s, &settings).with_context(|| format!("sample {}", s.name))?);
+    }
+    let t = totals(&rows);
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "rows": rows, "totals": t }))?);
+    } else {
+        print!("{}", format_table(&rows));
+    }
+    if let Some(name) = a.record {
+        let mut card = model.card.clone();
+        card.metrics.retain(|m| m.name != name && m.name != format!("{name}_nmi") && m.name != format!("{name}_sod"));
+        let protocol = format!("{} samples from {}", rows.len(), a.data.data.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "));
+        for (suffix, value) in [("", t.known.mean_error), ("_nmi", t.known.mean_nmi), ("_sod", t.sod.mean_error)] {
+            card.metrics.push(MetricRecord { name: format!("{name}{suffix}"), value, protocol: protocol.clone(), command: command_line() });
+        }
+        card.write(&a.model)?;
+    }
+    Ok(())
+}
+
+fn cv_cmd(a: CvCmd) -> Result<()> {
+    let seqs = a.data.sequences()?;
+    let input_dim = cv::test_sample(&seqs[0], a.data.clip_len).context("no test sample")?.points.dim();
+    let spec = CvSpec {
+        train: a.train.config(input_dim)?,
+        protocol: a.train.protocol,
+        clip_len: a.data.clip_len,
+        eval: EvalSettings { k_max: a.train.k_max, restarts: a.restarts, seed: 0 },
+        out: a.out.clone(),
+    };
+    std::fs::create_dir_all(&a.out)?;
+    std::fs::write(a.out.join("spec.json"), serde_json::to_string_pretty(&serde_json::json!({
+        "command": command_line(), "train": spec.train, "protocol": spec.protocol, "clip_len": spec.clip_len,
+    }))?)?;
+    let names: Vec<String> = seqs.iter().map(|s| s.name.clone()).collect();
+    if let Some(fold) = &a.fold {
+        let i = names.iter().position(|n| n == fold).with_context(|| format!("no sequence named {fold}"))?;
+        let r = cv::run_fold(&spec, &seqs, i)?;
+        eprintln!("fold {fold}: error {:.2}% (known K), {:.0} s", 100.0 * r.row.known.error, r.train_seconds);
+        return Ok(());
+    }
+    if a.jobs > 1 {
+        let exe = std::env::current_exe()?;
+        let args: Vec<String> = std::env::args().skip(1).filter(|x| !x.starts_with("--jobs=")).collect();
+        let args = strip_flag_value(args, "--jobs");
+        let failed = cv::run_in_processes(&exe, &args, &a.out, &names, a.jobs)?;
+        if !failed.is_empty() {
+            bail!("folds failed: {failed:?} (rerun to retry them; finished folds are kept)");
+        }
+    } else {
+        for (i, name) in names.iter().enumerate() {
+            if STOP.load(Ordering::Relaxed) {
+                bail!("interrupted; finished folds are kept in {}", a.out.display());
+            }
+            let r = cv::run_fold(&spec, &seqs, i)?;
+            eprintln!("fold {name}: error {:.2}% (known K), {:.0} s", 100.0 * r.row.known.error, r.train_seconds);
+        }
+    }
+    let folds: Vec<cv::FoldResult> = names.iter().filter_map(|n| cv::finished_fold(&a.out, n)).collect();
+    let rows: Vec<_> = folds.iter().map(|f| f.row.clone()).collect();
+    let t = totals(&rows);
+    let train_seconds: f64 = folds.iter().map(|f| f.train_seconds).sum();
+    std::fs::write(a.out.join("summary.json"), serde_json::to_string_pretty(&serde_json::json!({
+        "totals": t, "rows": rows, "train_seconds_total": train_seconds,
+    }))?)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "totals": t, "rows": rows }))?);
+    } else {
+        print!("{}", format_table(&rows));
+        println!("training time, all folds: {train_seconds:.0} s");
+    }
+    Ok(())
+}
+
+/// Removes `flag VALUE` pairs (the `--flag=VALUE` form is removed by the caller's filter).
+fn strip_flag_value(args: Vec<String>, flag: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut skip = false;
+    for a in args {
+        if skip {
+            skip = false;
+            continue;
+        }
+        if a == flag {
+            skip = true;
+            continue;
+        }
+        out.push(a);
+    }
+    out
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let _ = ctrlc::set_handler(|| {
+        if STOP.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+        eprintln!("stopping after the current step (Ctrl-C again to quit at once)");
+    });
+    let result = match cli.command {
+        Command::GenLce(a) => gen_lce(a),
+        Command::Train(a) => train_cmd(a),
+        Command::Eval(a) => eval_cmd(a),
+        Command::Cv(a) => cv_cmd(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,546 @@
+//! K-means on embeddings, the residual curve r(K) and the choice of K (section 3.3 of the paper).
+//!
+//! - [`kmeans`]: Lloyd iterations from k-means++ seeds, several restarts, the lowest residual
+//!   kept. Deterministic for a fixed seed: every K draws from its own stream derived from the seed,
+//!   so a K's clustering does not depend on which other K were tried.
+//! - `r(K) = sum_m sum_{i in C_m} ||z_i - mu_m||^2`.
+//! - K selection ([`Selection`]):
+//!   - `Sod`: the second-order difference of `l(K) = log r(K)`,
+//!     `sod(K) = l(K-1) + l(K+1) - 2 l(K)`, maximised over `2 <= K <= k_max`. To judge `k_max`
+//!     itself the curve is computed up to `k_max + 1` (capped at N).
+//!   - `Silhouette`: the mean silhouette over `2 <= K <= k_max`, maximised. Exact (O(N^2) time,
+//!     O(N K) memory) up to [`SILHOUETTE_EXACT_MAX`] points; beyond, on a seeded uniform sample of
+//!     that many points, as scikit-learn's `sample_size` does.
+//!   - `Fixed(K)`: K is given; only that K is clustered.
+//! - A single structure (K = 1): neither SOD nor the silhouette can choose K = 1 (SOD has no
+//!   `r(0)`, the silhouette is undefined for one cluster). Automatic selection returns K = 1 when
+//!   `k_max = 1` or when the embeddings are collapsed, i.e. their mean squared distance to their
+//!   mean, `r(1) / N`, is below `single_spread` (default 0.01; unit embeddings spread over several
+//!   structures give values of 0.3 and more).
+
+use rand::rngs::ChaCha8Rng;
+use rand::{RngExt, SeedableRng};
+use serde::{Deserialize, Serialize};
+
+/// Points above which the silhouette is computed on a seeded sample of this many points.
+pub const SILHOUETTE_EXACT_MAX: usize = 3000;
+
+/// How K is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Selection {
+    Sod,
+    Silhouette,
+    Fixed(usize),
+}
+
+impl Selection {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Selection::Sod => "sod",
+            Selection::Silhouette => "silhouette",
+            Selection::Fixed(_) => "fixed",
+        }
+    }
+}
+
+/// Invalid clustering parameters or input.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ClusterError {
+    #[error("k_max must be at least 1")]
+    ZeroKMax,
+    #[error("k = {k} is out of range: it must be between 1 and the number of points ({n})")]
+    KOutOfRange { k: usize, n: usize },
+    #[error("restarts must be at least 1")]
+    ZeroRestarts,
+    #[error("max_iter must be at least 1")]
+    ZeroMaxIter,
+    #[error("single_spread must be finite and non-negative")]
+    BadSpread,
+    #[error("embeddings must be a non-empty [n, dim] array of finite values")]
+    BadEmbeddings,
+}
+
+/// Validated clustering parameters; build with [`ClusterParams::builder`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClusterParams {
+    k_max: usize,
+    selection: Selection,
+    restarts: usize,
+    max_iter: usize,
+    seed: u64,
+    single_spread: f64,
+}
+
+/// Builder for [`ClusterParams`] (defaults: k_max 8, SOD, 4 restarts, 100 iterations, seed 0).
+#[derive(Debug, Clone)]
+pub struct ClusterParamsBuilder(ClusterParams);
+
+impl ClusterParams {
+    pub fn builder() -> ClusterParamsBuilder {
+        ClusterParamsBuilder(ClusterParams {
+            k_max: 8,
+            selection: Selection::Sod,
+            restarts: 4,
+            max_iter: 100,
+            seed: 0,
+            single_spread: 0.01,
+        })
+    }
+    pub fn k_max(&self) -> usize {
+        self.k_max
+    }
+    pub fn selection(&self) -> Selection {
+        self.selection
+    }
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+}
+
+impl ClusterParamsBuilder {
+    pub fn k_max(mut self, k_max: usize) -> Self {
+        self.0.k_max = k_max;
+        self
+    }
+    pub fn selection(mut self, selection: Selection) -> Self {
+        self.0.selection = selection;
+        self
+    }
+    pub fn restarts(mut self, restarts: usize) -> Self {
+        self.0.restarts = restarts;
+        self
+    }
+    pub fn max_iter(mut self, max_iter: usize) -> Self {
+        self.0.max_iter = max_iter;
+        self
+    }
+    pub fn seed(mut self, seed: u64) -> Self {
+        self.0.seed = seed;
+        self
+    }
+    pub fn single_spread(mut self, spread: f64) -> Self {
+        self.0.single_spread = spread;
+        self
+    }
+    pub fn build(self) -> Result<ClusterParams, ClusterError> {
+        let p = self.0;
+        if p.k_max == 0 {
+            return Err(ClusterError::ZeroKMax);
+        }
+        if let Selection::Fixed(0) = p.selection {
+            return Err(ClusterError::KOutOfRange { k: 0, n: 0 });
+        }
+        if p.restarts == 0 {
+            return Err(ClusterError::ZeroRestarts);
+        }
+        if p.max_iter == 0 {
+            return Err(ClusterError::ZeroMaxIter);
+        }
+        if !(p.single_spread.is_finite() && p.single_spread >= 0.0) {
+            return Err(ClusterError::BadSpread);
+        }
+        Ok(p)
+    }
+}
+
+/// One k-means solution.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KMeans {
+    pub labels: Vec<usize>,
+    /// Row-major `[k, dim]`.
+    pub centroids: Vec<f64>,
+    pub residual: f64,
+}
+
+/// The clustering of a set with its chosen K.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Clustering {
+    /// Per point, in `0..k`, numbered by first appearance in input order.
+    pub labels: Vec<usize>,
+    pub k: usize,
+    pub selection: Selection,
+    /// `(K, r(K))` for every K clustered, ascending.
+    pub residuals: Vec<(usize, f64)>,
+    /// `(K, score)`: the SOD value or the mean silhouette of every K that was a candidate.
+    pub scores: Vec<(usize, f64)>,
+    /// Points per cluster, indexed by label.
+    pub cluster_sizes: Vec<usize>,
+}
+
+/// A row-major `[n, dim]` view of embeddings.
+#[derive(Debug, Clone, Copy)]
+pub struct Points<'a> {
+    data: &'a [f32],
+    dim: usize,
+}
+
+impl<'a> Points<'a> {
+    pub fn new(data: &'a [f32], dim: usize) -> Result<Self, ClusterError> {
+        if dim == 0 || data.is_empty() || data.len() % dim != 0 || data.iter().any(|v| !v.is_finite()) {
+            return Err(ClusterError::BadEmbeddings);
+        }
+        Ok(Self { data, dim })
+    }
+    pub fn len(&self) -> usize {
+        self.data.len() / self.dim
+    }
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+    fn row(&self, i: usize) -> &[f32] {
+        &self.data[i * self.dim..(i + 1) * self.dim]
+    }
+}
+
+fn sq_dist(a: &[f32], c: &[f64]) -> f64 {
+    a.iter().zip(c).map(|(&x, &y)| (x as f64 - y).powi(2)).sum()
+}
+
+/// The seed of K's random stream.
+fn stream_seed(seed: u64, k: usize) -> u64 {
+    seed ^ (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+}
+
+/// k-means++ seeding: [k, dim] centroids.
+fn kmeans_pp(p: Points, k: usize, rng: &mut ChaCha8Rng) -> Vec<f64> {
+    let n = p.len();
+    let mut centroids: Vec<f64> = Vec::with_capacity(k * p.dim);
+    let first = rng.random_range(0..n);
+    centroids.extend(p.row(first).iter().map(|&v| v as f64));
+    let mut d2: Vec<f64> = (0..n).map(|i| sq_dist(p.row(i), &centroids[..p.dim])).collect();
+    for c in 1..k {
+        let total: f64 = d2.iter().sum();
+        let pick = if total > 0.0 {
+            let mut target = rng.random_range(0.0..total);
+            let mut pick = n - 1;
+            for (i, &d) in d2.iter().enumerate() {
+                if target < d {
+                    pick = i;
+                    break;
+                }
+                target -= d;
+            }
+            pick
+        } else {
+            rng.random_range(0..n)
+        };
+        centroids.extend(p.row(pick).iter().map(|&v| v as f64));
+        let new = &centroids[c * p.dim..(c + 1) * p.dim];
+        for (i, d) in d2.iter_mut().enumerate() {
+            *d = d.min(sq_dist(p.row(i), new));
+        }
+    }
+    centroids
+}
+
+/// Lloyd iterations from the given centroids until assignments stop changing.
+fn lloyd(p: Points, k: usize, mut centroids: Vec<f64>, max_iter: usize) -> KMeans {
+    let (n, dim) = (p.len(), p.dim);
+    let mut labels = vec![usize::MAX; n];
+    let mut dist = vec![0f64; n];
+    for _ in 0..max_iter {
+        let mut changed = false;
+        for i in 0..n {
+            let (best, d) = (0..k)
+                .map(|c| (c, sq_dist(p.row(i), &centroids[c * dim..(c + 1) * dim])))
+                .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+            dist[i] = d;
+            if labels[i] != best {
+                labels[i] = best;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
+        let mut sums = vec![0f64; k * dim];
+        let mut counts = vec![0usize; k];
+        for i in 0..n {
+            counts[labels[i]] += 1;
+            for (s, &v) in sums[labels[i] * dim..].iter_mut().zip(p.row(i)) {
+                *s += v as f64;
+            }
+        }
+        for c in 0..k {
+            if counts[c] == 0 {
+                // An empty cluster takes the point farthest from its centroid.
+                let far = (0..n).max_by(|&a, &b| dist[a].total_cmp(&dist[b])).unwrap_or(0);
+                dist[far] = 0.0;
+                labels[far] = c;
+                for (s, &v) in sums[c * dim..(c + 1) * dim].iter_mut().zip(p.row(far)) {
+                    *s = v as f64;
+                }
+                counts[c] = 1;
+            }
+            for s in &mut sums[c * dim..(c + 1) * dim] {
+                *s /= counts[c] as f64;
+            }
+        }
+        centroids = sums;
+    }
+    let residual = (0..n).map(|i| sq_dist(p.row(i), &centroids[labels[i] * dim..(labels[i] + 1) * dim])).sum();
+    KMeans { labels, centroids, residual }
+}
+
+/// k-means with k-means++ seeding and `restarts` restarts; the lowest residual is kept.
+/// Requires `1 <= k <= n`.
+pub fn kmeans(p: Points, k: usize, restarts: usize, max_iter: usize, seed: u64) -> KMeans {
+    let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(seed, k));
+    let mut best: Option<KMeans> = None;
+    for _ in 0..restarts.max(1) {
+        let init = kmeans_pp(p, k, &mut rng);
+        let run = lloyd(p, k, init, max_iter);
+        if best.as_ref().is_none_or(|b| run.residual < b.residual) {
+            best = Some(run);
+        }
+    }
+    best.expect("at least one restart")
+}
+
+/// Mean silhouette of a labelling (Euclidean distances), exact on the given rows.
+/// Needs at least two clusters; a point alone in its cluster scores 0.
+pub fn silhouette(p: Points, labels: &[usize], k: usize) -> f64 {
+    let n = p.len();
+    let mut counts = vec![0usize; k];
+    for &l in labels {
+        counts[l] += 1;
+    }
+    let mut sums = vec![0f64; k];
+    let mut total = 0.0;
+    for i in 0..n {
+        sums.iter_mut().for_each(|s| *s = 0.0);
+        let zi = p.row(i);
+        for j in 0..n {
+            let d: f32 = zi.iter().zip(p.row(j)).map(|(a, b)| (a - b) * (a - b)).sum();
+            sums[labels[j]] += d.sqrt() as f64;
+        }
+        let own = labels[i];
+        if counts[own] <= 1 {
+            continue;
+        }
+        let a = sums[own] / (counts[own] - 1) as f64;
+        let b = (0..k)
+            .filter(|&c| c != own && counts[c] > 0)
+            .map(|c| sums[c] / counts[c] as f64)
+            .fold(f64::INFINITY, f64::min);
+        if b.is_finite() && a.max(b) > 0.0 {
+            total += (b - a) / a.max(b);
+        }
+    }
+    total / n as f64
+}
+
+/// Silhouette of K's labelling, on a seeded sample when the set is large.
+fn silhouette_score(p: Points, labels: &[usize], k: usize, seed: u64) -> f64 {
+    let n = p.len();
+    if n <= SILHOUETTE_EXACT_MAX {
+        return silhouette(p, labels, k);
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5151);
+    let mut idx: Vec<usize> = (0..n).collect();
+    for i in 0..SILHOUETTE_EXACT_MAX {
+        let j = rng.random_range(i..n);
+        idx.swap(i, j);
+    }
+    idx.truncate(SILHOUETTE_EXACT_MAX);
+    let data: Vec<f32> = idx.iter().flat_map(|&i| p.row(i).iter().copied()).collect();
+    let sub_labels: Vec<usize> = idx.iter().map(|&i| labels[i]).collect();
+    silhouette(Points { data: &data, dim: p.dim }, &sub_labels, k)
+}
+
+/// Relabels clusters by first appearance in input order, so equal partitions give equal labels.
+fn canonical(labels: &[usize], k: usize) -> (Vec<usize>, Vec<usize>) {
+    let mut map = vec![usize::MAX; k];
+    let mut next = 0;
+    let mut out = Vec::with_capacity(labels.len());
+    for &l in labels {
+        if map[l] == usize::MAX {
+            map[l] = next;
+            next += 1;
+        }
+        out.push(map[l]);
+    }
+    let mut sizes = vec![0usize; next];
+    for &l in &out {
+        sizes[l] += 1;
+    }
+    (out, sizes)
+}
+
+/// SOD scores `(K, sod(K))` for the inner points of the curve.
+pub fn sod_scores(residuals: &[(usize, f64)]) -> Vec<(usize, f64)> {
+    let floor = residuals.first().map_or(0.0, |r| r.1) * 1e-9 + 1e-12;
+    let l: Vec<f64> = residuals.iter().map(|&(_, r)| (r + floor).ln()).collect();
+    (1..residuals.len().saturating_sub(1))
+        .map(|i| (residuals[i].0, l[i - 1] + l[i + 1] - 2.0 * l[i]))
+        .collect()
+}
+
+fn argmax(scores: &[(usize, f64)]) -> Option<usize> {
+    scores.iter().fold(None, |best: Option<(usize, f64)>, &(k, s)| match best {
+        Some((_, b)) if b >= s => best,
+        _ => Some((k, s)),
+    })
+    .map(|b| b.0)
+}
+
+/// Clusters embeddings, choosing K as `params` says.
+pub fn cluster(p: Points, params: &ClusterParams) -> Result<Clustering, ClusterError> {
+    let n = p.len();
+    let (seed, restarts, iters) = (params.seed, params.restarts, params.max_iter);
+    let run = |k: usize| kmeans(p, k, restarts, iters, seed);
+    let (chosen, residuals, scores) = match params.selection {
+        Selection::Fixed(k) => {
+            if k == 0 || k > n {
+                return Err(ClusterError::KOutOfRange { k, n });
+            }
+            let km = run(k);
+            let r = vec![(k, km.residual)];
+            (km, r, vec![])
+        }
+        selection => {
+            let k_max = params.k_max.min(n);
+            let top = match selection {
+                Selection::Sod => (k_max + 1).min(n),
+                _ => k_max,
+            };
+            let runs: Vec<KMeans> = (1..=top).map(run).collect();
+            let residuals: Vec<(usize, f64)> =
+                runs.iter().enumerate().map(|(i, r)| (i + 1, r.residual)).collect();
+            let scores: Vec<(usize, f64)> = match selection {
+                Selection::Sod => sod_scores(&residuals).into_iter().filter(|s| s.0 <= k_max).collect(),
+                _ => (2..=k_max).map(|k| (k, silhouette_score(p, &runs[k - 1].labels, k, seed))).collect(),
+            };
+            let single = k_max == 1 || residuals[0].1 / (n as f64) < params.single_spread;
+            let k = if single { 1 } else { argmax(&scores).unwrap_or(k_max) };
+            let mut runs = runs;
+            (runs.swap_remove(k - 1), residuals, scores)
+        }
+    };
+    let k = chosen.centroids.len() / p.dim;
+    let (labels, cluster_sizes) = canonical(&chosen.labels, k);
+    Ok(Clustering { k: cluster_sizes.len(), labels, selection: params.selection, residuals, scores, cluster_sizes })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `k` tight blobs of `m` points around well-separated 2D centres.
+    fn blobs(k: usize, m: usize) -> (Vec<f32>, Vec<usize>) {
+        let mut data = Vec::new();
+        let mut labels = Vec::new();
+        for i in 0..m {
+            for c in 0..k {
+                let angle = c as f32 * std::f32::consts::TAU / k as f32;
+                let jitter = ((i * 31 + c * 17) % 13) as f32 / 13.0 * 0.05;
+                data.push(angle.cos() * 3.0 + jitter);
+                data.push(angle.sin() * 3.0 - jitter);
+                labels.push(c);
+            }
+        }
+        (data, labels)
+    }
+
+    fn params(sel: Selection) -> ClusterParams {
+        ClusterParams::builder().selection(sel).seed(9).build().unwrap()
+    }
+
+    #[test]
+    fn kmeans_by_hand() {
+        // Two pairs: {0, 1} around 0.5 and {10, 12} around 11; r = 0.25*2 + 1*2 = 2.5.
+        let data = [0.0f32, 1.0, 10.0, 12.0];
+        let km = kmeans(Points::new(&data, 1).unwrap(), 2, 3, 50, 1);
+        assert!((km.residual - 2.5).abs() < 1e-9);
+        assert_eq!(km.labels[0], km.labels[1]);
+        assert_eq!(km.labels[2], km.labels[3]);
+        assert_ne!(km.labels[0], km.labels[2]);
+        // r(1) = sum of squared deviations from the mean 5.75.
+        let one = kmeans(Points::new(&data, 1).unwrap(), 1, 1, 50, 1);
+        let want: f64 = data.iter().map(|&v| (v as f64 - 5.75).powi(2)).sum();
+        assert!((one.residual - want).abs() < 1e-9);
+    }
+
+    #[test]
+    fn sod_and_silhouette_find_the_blobs() {
+        for k in 2..=5 {
+            let (data, truth) = blobs(k, 20);
+            let p = Points::new(&data, 2).unwrap();
+            for sel in [Selection::Sod, Selection::Silhouette] {
+                let c = cluster(p, &params(sel)).unwrap();
+                assert_eq!(c.k, k, "{sel:?}");
+                assert_eq!(crate::metrics::error_rate(&truth, &c.labels), 0.0);
+            }
+        }
+    }
+
+    #[test]
+    fn residual_curve_is_non_increasing_and_sizes_add_up() {
+        let (data, _) = blobs(3, 30);
+        let c = cluster(Points::new(&data, 2).unwrap(), &params(Selection::Sod)).unwrap();
+        assert_eq!(c.residuals.len(), 9); // K = 1..k_max + 1
+        for w in c.residuals.windows(2) {
+            assert!(w[1].1 <= w[0].1 + 1e-9, "{:?}", c.residuals);
+        }
+        assert_eq!(c.cluster_sizes.iter().sum::<usize>(), 90);
+        assert_eq!(c.scores.iter().map(|s| s.0).collect::<Vec<_>>(), (2..=8).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn deterministic_and_invariant_to_point_order() {
+        let (data, _) = blobs(4, 25);
+        let p = Points::new(&data, 2).unwrap();
+        let a = cluster(p, &params(Selection::Sod)).unwrap();
+        let b = cluster(p, &params(Selection::Sod)).unwrap();
+        assert_eq!(a, b);
+        // Reversed rows give the same partition (labels compared up to renaming).
+        let rev: Vec<f32> = data.chunks(2).rev().flatten().copied().collect();
+        let c = cluster(Points::new(&rev, 2).unwrap(), &params(Selection::Sod)).unwrap();
+        let back: Vec<usize> = c.labels.iter().rev().copied().collect();
+        assert_eq!(crate::metrics::error_rate(&a.labels, &back), 0.0);
+    }
+
+    #[test]
+    fn single_structure_and_caps() {
+        let data: Vec<f32> = (0..40).map(|i| 1.0 + (i % 5) as f32 * 1e-3).collect();
+        let c = cluster(Points::new(&data, 2).unwrap(), &params(Selection::Sod)).unwrap();
+        assert_eq!(c.k, 1);
+        assert_eq!(c.labels, vec![0; 20]);
+        // k_max is capped at N.
+        let three = [0.0f32, 0.0, 5.0, 5.0, 10.0, 0.0];
+        let c = cluster(Points::new(&three, 2).unwrap(), &params(Selection::Silhouette)).unwrap();
+        assert!(c.k <= 3 && c.residuals.len() == 3);
+        assert_eq!(
+            cluster(Points::new(&three, 2).unwrap(), &params(Selection::Fixed(4))),
+            Err(ClusterError::KOutOfRange { k: 4, n: 3 })
+        );
+    }
+
+    #[test]
+    fn silhouette_by_hand() {
+        // Clusters {0, 1} and {4}: point 0: a = 1, b = 4 -> 0.75; point 1: a = 1, b = 3 -> 2/3;
+        // point 4 alone -> 0. Mean = (0.75 + 0.6667) / 3.
+        let data = [0.0f32, 1.0, 4.0];
+        let s = silhouette(Points::new(&data, 1).unwrap(), &[0, 0, 1], 2);
+        assert!((s - (0.75 + 2.0 / 3.0) / 3.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn sod_by_hand() {
+        // log r: 0, -2, -2.5, -2.7 -> sod(2) = 0 - 2.5 + 4 = 1.5, sod(3) = -2 - 2.7 + 5 = 0.3.
+        let r: Vec<(usize, f64)> = [0.0, -2.0, -2.5, -2.7].iter().enumerate().map(|(i, l)| (i + 1, f64::exp(*l))).collect();
+        let s = sod_scores(&r);
+        assert_eq!(s.len(), 2);
+        assert!((s[0].1 - 1.5).abs() < 1e-6 && (s[1].1 - 0.3).abs() < 1e-6);
+        assert_eq!(argmax(&s), Some(2));
+    }
+
+    #[test]
+    fn rejects_bad_params() {
+        assert_eq!(ClusterParams::builder().k_max(0).build(), Err(ClusterError::ZeroKMax));
+        assert_eq!(ClusterParams::builder().restarts(0).build(), Err(ClusterError::ZeroRestarts));
+        assert!(Points::new(&[1.0, f32::NAN], 1).is_err());
+        assert!(Points::new(&[1.0, 2.0, 3.0], 2).is_err());
+    }
+}

@@ -1,0 +1,261 @@
+//! Labelled sequences on disk (the JSON format of `../shared/datasets/README.md`), the labelled
+//! samples training and evaluation use, and KT3DMoSeg clip cutting.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use super::points::{ImageSize, InputError, Kind, PointSet};
+
+/// Why a dataset file or directory could not be used. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum DataError {
+    #[error("{path}: cannot read: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: not valid dataset JSON: {source}")]
+    Json { path: PathBuf, source: serde_json::Error },
+    #[error("{path}: {reason}")]
+    Invalid { path: PathBuf, reason: String },
+    #[error("{path}: no dataset files (*.json) found")]
+    NoFiles { path: PathBuf },
+}
+
+/// One sequence file as stored on disk.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SequenceFile {
+    pub name: String,
+    pub kind: Kind,
+    pub points: Vec<Vec<f64>>,
+    /// 0 = gross outlier (AdelaideRMF only); structures 1..K.
+    pub labels: Vec<i64>,
+    #[serde(default)]
+    pub num_models: Option<usize>,
+    #[serde(default)]
+    pub image_size: Option<[f64; 2]>,
+    #[serde(default)]
+    pub source: Option<String>,
+    /// AdelaideRMF: "homography" or "fundamental".
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_type: Option<String>,
+    /// KT3DMoSeg full files: P x F visibility (0/1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub visible: Option<Vec<Vec<u8>>>,
+}
+
+/// A validated labelled sequence.
+#[derive(Debug, Clone)]
+pub struct Sequence {
+    pub name: String,
+    pub points: PointSet,
+    /// Raw labels as in the file (0 = outlier).
+    pub labels: Vec<i64>,
+    pub image_size: Option<ImageSize>,
+    pub model_type: Option<String>,
+    /// P x F visibility, for trajectories with missing frames.
+    pub visible: Option<Vec<Vec<u8>>>,
+}
+
+/// A labelled sample ready for training or evaluation: labels renumbered to `0..k`, outliers
+/// (raw label 0) kept as one more group, as the paper does.
+#[derive(Debug, Clone)]
+pub struct Sample {
+    pub name: String,
+    pub points: PointSet,
+    pub labels: Vec<usize>,
+    /// Number of groups in `labels` (structures, plus one when outliers are present).
+    pub k: usize,
+    pub image_size: Option<ImageSize>,
+}
+
+impl Sequence {
+    /// Validates a parsed file; `path` only names the file in errors.
+    pub fn from_file(file: SequenceFile, path: &Path) -> Result<Self, DataError> {
+        let invalid = |reason: String| DataError::Invalid { path: path.to_path_buf(), reason };
+        let points = PointSet::from_rows(file.kind, &file.points)
+            .map_err(|e: InputError| invalid(format!("points: {e}")))?;
+        if file.labels.len() != points.len() {
+            return Err(invalid(format!(
+                "{} labels for {} points",
+                file.labels.len(),
+                points.len()
+            )));
+        }
+        if let Some(l) = file.labels.iter().find(|&&l| l < 0) {
+            return Err(invalid(format!("negative label {l}")));
+        }
+        let image_size = match file.image_size {
+            Some([w, h]) => {
+                Some(ImageSize::new(w, h).map_err(|e| invalid(format!("image_size: {e}")))?)
+            }
+            None => None,
+        };
+        if let Some(vis) = &file.visible {
+            let frames = points.dim() / 2;
+            if vis.len() != points.len() || vis.iter().any(|r| r.len() != frames) {
+                return Err(invalid(format!("visible must be {} x {frames}", points.len())));
+            }
+        }
+        Ok(Self {
+            name: file.name,
+            points,
+            labels: file.labels,
+            image_size,
+            model_type: file.model_type,
+            visible: file.visible,
+        })
+    }
+
+    /// Reads and validates one sequence file.
+    pub fn load(path: &Path) -> Result<Self, DataError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| DataError::Io { path: path.to_path_buf(), source })?;
+        let file: SequenceFile = serde_json::from_str(&text)
+            .map_err(|source| DataError::Json { path: path.to_path_buf(), source })?;
+        Self::from_file(file, path)
+    }
+
+    /// Number of frames (trajectories) or views (correspondences: 2, points2d: 1).
+    pub fn frames(&self) -> usize {
+        self.points.dim() / 2
+    }
+
+    /// The labelled sample, labels renumbered to `0..k` in the order of the raw labels.
+    pub fn sample(&self) -> Sample {
+        let (labels, k) = renumber(&self.labels);
+        Sample {
+            name: self.name.clone(),
+            points: self.points.clone(),
+            labels,
+            k,
+            image_size: self.image_size,
+        }
+    }
+
+    /// Frames `[start, start + len)` of a trajectory sequence: the rows visible in all of those
+    /// frames, their `2 * len` values, labels renumbered. `None` when the frames do not exist or
+    /// fewer than two points are visible throughout.
+    pub fn clip(&self, start: usize, len: usize) -> Option<Sample> {
+        if self.points.kind() != Kind::Trajectories || len < 2 || start + len > self.frames() {
+            return None;
+        }
+        let rows: Vec<usize> = (0..self.points.len())
+            .filter(|&i| match &self.visible {
+                Some(vis) => vis[i][start..start + len].iter().all(|&v| v == 1),
+                None => true,
+            })
+            .collect();
+        let values: Vec<f64> = rows
+            .iter()
+            .flat_map(|&i| self.points.row(i)[2 * start..2 * (start + len)].iter().copied())
+            .collect();
+        let points = PointSet::from_flat(Kind::Trajectories, 2 * len, values).ok()?;
+        let raw: Vec<i64> = rows.iter().map(|&i| self.labels[i]).collect();
+        let (labels, k) = renumber(&raw);
+        Some(Sample {
+            name: format!("{}[{}..{}]", self.name, start + 1, start + len),
+            points,
+            labels,
+            k,
+            image_size: self.image_size,
+        })
+    }
+
+    /// Non-overlapping clips of `len` frames starting at frame 0, then `len`, `2 len`, ...
+    /// (the paper's 'Augment' setting; the first is the test clip).
+    pub fn clips(&self, len: usize) -> Vec<Sample> {
+        (0..self.frames() / len.max(1)).filter_map(|c| self.clip(c * len, len)).collect()
+    }
+}
+
+/// Renumbers arbitrary labels to `0..k` preserving their order; returns the labels and `k`.
+pub fn renumber(raw: &[i64]) -> (Vec<usize>, usize) {
+    let mut distinct: Vec<i64> = raw.to_vec();
+    distinct.sort_unstable();
+    distinct.dedup();
+    let labels = raw.iter().map(|l| distinct.binary_search(l).unwrap_or(0)).collect();
+    (labels, distinct.len())
+}
+
+/// Loads every `*.json` file of a directory (sorted by file name), or a single file.
+/// `model_type`, when given, keeps only sequences of that AdelaideRMF model type.
+pub fn load_sequences(path: &Path, model_type: Option<&str>) -> Result<Vec<Sequence>, DataError> {
+    let files = if path.is_dir() {
+        let mut files: Vec<PathBuf> = std::fs::read_dir(path)
+            .map_err(|source| DataError::Io { path: path.to_path_buf(), source })?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|e| e == "json") && p.is_file())
+            .filter(|p| p.file_name().is_some_and(|n| n != "INDEX.json"))
+            .collect();
+        files.sort();
+        files
+    } else {
+        vec![path.to_path_buf()]
+    };
+    let mut out = Vec::new();
+    for f in &files {
+        let seq = Sequence::load(f)?;
+        if model_type.is_none_or(|t| seq.model_type.as_deref() == Some(t)) {
+            out.push(seq);
+        }
+    }
+    if out.is_empty() {
+        return Err(DataError::NoFiles { path: path.to_path_buf() });
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn traj_file() -> SequenceFile {
+        // 3 points, 4 frames; point 2 invisible in frame 3.
+        SequenceFile {
+            name: "t".into(),
+            kind: Kind::Trajectories,
+            points: vec![
+                (0..8).map(|v| v as f64).collect(),
+                (0..8).map(|v| 10.0 + v as f64).collect(),
+                vec![1.0, 1.0, 2.0, 2.0, 0.0, 0.0, 3.0, 3.0],
+            ],
+            labels: vec![2, 5, 5],
+            num_models: Some(2),
+            image_size: Some([100.0, 50.0]),
+            source: None,
+            model_type: None,
+            visible: Some(vec![vec![1, 1, 1, 1], vec![1, 1, 1, 1], vec![1, 1, 0, 1]]),
+        }
+    }
+
+    #[test]
+    fn renumber_keeps_order_and_counts() {
+        assert_eq!(renumber(&[7, 0, 7, 3]), (vec![2, 0, 2, 1], 3));
+    }
+
+    #[test]
+    fn clips_keep_only_fully_visible_rows() {
+        let seq = Sequence::from_file(traj_file(), Path::new("t.json")).unwrap();
+        let first = seq.clip(0, 2).unwrap();
+        assert_eq!(first.points.len(), 3);
+        assert_eq!(first.points.row(1), &[10.0, 11.0, 12.0, 13.0]);
+        assert_eq!(first.labels, vec![0, 1, 1]);
+        let second = seq.clip(2, 2).unwrap();
+        assert_eq!(second.points.len(), 2);
+        assert_eq!(second.points.row(0), &[4.0, 5.0, 6.0, 7.0]);
+        assert_eq!(second.k, 2);
+        assert!(seq.clip(3, 2).is_none());
+        assert_eq!(seq.clips(2).len(), 2);
+    }
+
+    #[test]
+    fn bad_files_name_the_reason() {
+        let mut f = traj_file();
+        f.labels.pop();
+        let err = Sequence::from_file(f, Path::new("x.json")).unwrap_err().to_string();
+        assert!(err.contains("x.json") && err.contains("2 labels for 3 points"), "{err}");
+        let mut f = traj_file();
+        f.points[1].pop();
+        let err = Sequence::from_file(f, Path::new("x.json")).unwrap_err().to_string();
+        assert!(err.contains("row 1"), "{err}");
+    }
+}

@@ -1,0 +1,8 @@
+//! Inputs: validated point sets, normalisation, labelled datasets and synthetic generators.
+
+pub mod dataset;
+pub mod points;
+pub mod synthetic;
+
+pub use dataset::{DataError, Sample, Sequence, SequenceFile, load_sequences};
+pub use points::{ImageSize, InputError, Kind, MIN_POINTS, Normalization, PointSet};

@@ -1,0 +1,299 @@
+//! The embedding network: a CNe-style stack of per-point layers with Context Normalization.
+//!
+//! ```text
+//! x [b, n, d] -> Linear(d, w)
+//!   -> depth x { h = ReLU(BN?(CN(Linear(w, w) x))); h = ReLU(BN?(CN(Linear(w, w) h))); x = x + h }
+//!   -> Linear(w, e) -> L2-normalise each point -> z [b, n, e]
+//! ```
+//! Context Normalization (CN) standardises every channel over the points of one set (no learned
+//! scale or shift). Linears inside the blocks carry no bias: CN's mean subtraction would cancel it.
+//! The optional BatchNorm follows CNe; note that after CN every channel already has zero mean and
+//! unit variance over each set, so BatchNorm adds little beyond its learned scale and shift.
+
+use std::path::Path;
+
+use burn::module::Module;
+use burn::nn::{BatchNorm, BatchNormConfig, Linear, LinearConfig};
+use burn::prelude::*;
+use burn::store::{ModuleSnapshot, SafetensorsStore};
+use burn::tensor::activation::relu;
+use serde::{Deserialize, Serialize};
+
+/// Architecture of the embedding network; stored in every model card.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelConfig {
+    /// Values per input point (2 for points2d, 4 for correspondences, 2F for trajectories).
+    pub input_dim: usize,
+    /// Channels of every hidden layer.
+    pub width: usize,
+    /// Number of residual blocks.
+    pub depth: usize,
+    /// Output embedding dimension E.
+    pub embed_dim: usize,
+    /// BatchNorm after each Context Normalization (CNe) or not (the authors' later code).
+    pub batch_norm: bool,
+    /// Epsilon added to the variance in Context Normalization.
+    pub cn_epsilon: f64,
+}
+
+/// Why a model could not be built, saved or loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    #[error("invalid model config: {0}")]
+    Config(String),
+    #[error("{path}: cannot write weights: {reason}")]
+    Save { path: String, reason: String },
+    #[error("{path}: weights do not match the card's architecture: {reason}")]
+    Load { path: String, reason: String },
+}
+
+impl ModelConfig {
+    pub fn new(input_dim: usize) -> Self {
+        Self { input_dim, width: 128, depth: 12, embed_dim: 6, batch_norm: false, cn_epsilon: 1e-3 }
+    }
+
+    pub fn validate(&self) -> Result<(), ModelError> {
+        let bad = |m: &str| Err(ModelError::Config(m.to_string()));
+        if self.input_dim == 0 || self.input_dim > 4096 {
+            return bad("input_dim must be in 1..=4096");
+        }
+        if self.width == 0 || self.width > 4096 {
+            return bad("width must be in 1..=4096");
+        }
+        if self.depth > 256 {
+            return bad("depth must be at most 256");
+        }
+        if self.embed_dim < 2 || self.embed_dim > 256 {
+            return bad("embed_dim must be in 2..=256");
+        }
+        if !(self.cn_epsilon.is_finite() && self.cn_epsilon > 0.0) {
+            return bad("cn_epsilon must be finite and positive");
+        }
+        Ok(())
+    }
+
+    /// A freshly initialised network on `device` (seed the device first for reproducibility).
+    pub fn init(&self, device: &Device) -> Result<EmbeddingNet, ModelError> {
+        self.validate()?;
+        let w = self.width;
+        let bn = |on: bool| on.then(|| BatchNormConfig::new(w).init(device));
+        let blocks = (0..self.depth)
+            .map(|_| Block {
+                l1: LinearConfig::new(w, w).with_bias(false).init(device),
+                bn1: bn(self.batch_norm),
+                l2: LinearConfig::new(w, w).with_bias(false).init(device),
+                bn2: bn(self.batch_norm),
+            })
+            .collect();
+        Ok(EmbeddingNet {
+            input: LinearConfig::new(self.input_dim, w).init(device),
+            blocks,
+            output: LinearConfig::new(w, self.embed_dim).init(device),
+            cn_epsilon: self.cn_epsilon,
+        })
+    }
+
+    /// Multiply-adds per point of one forward pass (for FLOP accounting in benchmarks).
+    pub fn macs_per_point(&self) -> usize {
+        self.input_dim * self.width + 2 * self.depth * self.width * self.width + self.width * self.embed_dim
+    }
+}
+
+/// One residual block: `[Linear, CN, BN?, ReLU] x 2 + skip`.
+#[derive(Module, Debug)]
+pub struct Block {
+    pub l1: Linear,
+    pub bn1: Option<BatchNorm>,
+    pub l2: Linear,
+    pub bn2: Option<BatchNorm>,
+}
+
+/// The embedding network.
+#[derive(Module, Debug)]
+pub struct EmbeddingNet {
+    pub input: Linear,
+    pub blocks: Vec<Block>,
+    pub output: Linear,
+    pub cn_epsilon: f64,
+}
+
+/// Context Normalization: zero mean, unit variance per channel over the points of each set.
+/// x: [b, n, c] -> [b, n, c]
+pub fn context_norm(x: Tensor<3>, epsilon: f64) -> Tensor<3> {
+    let (var, mean) = x.clone().var_mean_bias(1);
+    (x - mean) / (var + epsilon).sqrt()
+}
+
+/// BatchNorm over every point of every set: x: [b, n, c] -> [b, n, c]
+fn batch_norm(bn: &BatchNorm, x: Tensor<3>) -> Tensor<3> {
+    let [b, n, c] = x.dims();
+    bn.forward(x.reshape([b * n, c])).reshape([b, n, c])
+}
+
+/// L2-normalises every point: z: [b, n, e] -> [b, n, e]
+pub fn l2_normalize(z: Tensor<3>) -> Tensor<3> {
+    let norm = z.clone().square().sum_dim(2).sqrt().clamp_min(1e-12);
+    z / norm
+}
+
+impl Block {
+    /// x: [b, n, w] -> [b, n, w]
+    fn forward(&self, x: Tensor<3>, eps: f64) -> Tensor<3> {
+        let stage = |lin: &Linear, bn: &Option<BatchNorm>, h: Tensor<3>| {
+            let mut h = context_norm(lin.forward(h), eps);
+            if let Some(bn) = bn {
+                h = batch_norm(bn, h);
+            }
+            relu(h)
+        };
+        let h = stage(&self.l1, &self.bn1, x.clone());
+        let h = stage(&self.l2, &self.bn2, h);
+        x + h
+    }
+}
+
+impl EmbeddingNet {
+    /// points: [b, n, d] -> embeddings [b, n, e], each row of unit length.
+    pub fn forward(&self, points: Tensor<3>) -> Tensor<3> {
+        let mut x = self.input.forward(points);
+        for block in &self.blocks {
+            x = block.forward(x, self.cn_epsilon);
+        }
+        l2_normalize(self.output.forward(x))
+    }
+
+    /// Embeds one normalised point set given row-major `[n, d]`; returns row-major `[n, e]`.
+    pub fn embed(&self, points: &[f32], dim: usize, device: &Device) -> Vec<f32> {
+        let n = points.len() / dim;
+        let x = Tensor::<3>::from_data(TensorData::new(points.to_vec(), [1, n, dim]), device);
+        self.forward(x).into_data().try_to_vec::<f32>().expect("f32 embeddings")
+    }
+
+    /// Writes the weights as safetensors.
+    pub fn save(&self, path: &Path) -> Result<(), ModelError> {
+        let mut store = SafetensorsStore::from_file(path).overwrite(true);
+        self.save_into(&mut store)
+            .map_err(|e| ModelError::Save { path: path.display().to_string(), reason: e.to_string() })
+    }
+
+    /// Loads weights written by [`EmbeddingNet::save`] into a network built from `config`.
+    /// Every tensor must be present, of the right shape, and none may be left over.
+    pub fn load(config: &ModelConfig, path: &Path, device: &Device) -> Result<Self, ModelError> {
+        let err = |reason: String| ModelError::Load { path: path.display().to_string(), reason };
+        if !path.is_file() {
+            return Err(err("file not found".into()));
+        }
+        let mut net = config.init(device)?;
+        let mut store = SafetensorsStore::from_file(path);
+        let result = net.load_from(&mut store).map_err(|e| err(e.to_string()))?;
+        if !result.errors.is_empty() || !result.missing.is_empty() || !result.unused.is_empty() {
+            let missing: Vec<&str> = result.missing.iter().map(|m| m.0.as_str()).collect();
+            return Err(err(format!(
+                "missing tensors {missing:?}, unexpected tensors {:?}, errors {:?}",
+                result.unused, result.errors
+            )));
+        }
+        Ok(net)
+    }
+}
+
+/// The CPU device of the backend selected by Cargo features (`flex` unless only `ndarray` is on).
+pub fn cpu_device() -> Device {
+    #[cfg(feature = "flex")]
+    {
+        Device::flex()
+    }
+    #[cfg(all(feature = "ndarray", not(feature = "flex")))]
+    #[allow(deprecated)]
+    {
+        Device::ndarray()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tiny() -> ModelConfig {
+        ModelConfig { input_dim: 4, width: 16, depth: 2, embed_dim: 3, batch_norm: false, cn_epsilon: 1e-3 }
+    }
+
+    fn points(n: usize, d: usize) -> Vec<f32> {
+        (0..n * d).map(|i| ((i * 7919 % 101) as f32 / 50.0) - 1.0).collect()
+    }
+
+    #[test]
+    fn context_norm_standardises_each_set_and_channel() {
+        let device = cpu_device();
+        let x = Tensor::<3>::from_data(
+            TensorData::new(vec![1.0f32, 10.0, 3.0, 20.0, 5.0, 60.0, 2.0, 2.0, 2.0, 4.0, 2.0, 6.0], [2, 3, 2]),
+            &device,
+        );
+        let y: Vec<f32> = context_norm(x, 1e-9).into_data().try_to_vec().unwrap();
+        // Set 0, channel 0: 1, 3, 5 -> mean 3, var 8/3.
+        let s = (8.0f32 / 3.0).sqrt();
+        assert!((y[0] + 2.0 / s).abs() < 1e-4 && y[2].abs() < 1e-4 && (y[4] - 2.0 / s).abs() < 1e-4);
+        // Set 1, channel 0 is constant: normalised to 0 (epsilon keeps it finite).
+        assert!(y[6].abs() < 1e-3 && y[8].abs() < 1e-3 && y[10].abs() < 1e-3);
+        for set in 0..2 {
+            for c in 0..2 {
+                let mean: f32 = (0..3).map(|i| y[set * 6 + i * 2 + c]).sum::<f32>() / 3.0;
+                assert!(mean.abs() < 1e-4);
+            }
+        }
+    }
+
+    #[test]
+    fn embeddings_are_unit_length_and_permutation_equivariant() {
+        let device = cpu_device();
+        device.seed(3);
+        let net = tiny().init(&device).unwrap();
+        let n = 9;
+        let p = points(n, 4);
+        let z = net.embed(&p, 4, &device);
+        assert_eq!(z.len(), n * 3);
+        for row in z.chunks(3) {
+            let len: f32 = row.iter().map(|v| v * v).sum::<f32>().sqrt();
+            assert!((len - 1.0).abs() < 1e-5);
+        }
+        // Reverse the points: the embeddings reverse with them.
+        let rev: Vec<f32> = p.chunks(4).rev().flatten().copied().collect();
+        let zr = net.embed(&rev, 4, &device);
+        for (i, row) in zr.chunks(3).enumerate() {
+            let orig = &z[(n - 1 - i) * 3..(n - i) * 3];
+            for (a, b) in row.iter().zip(orig) {
+                assert!((a - b).abs() < 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn safetensors_round_trip_is_bit_identical() {
+        let device = cpu_device();
+        device.seed(5);
+        for bn in [false, true] {
+            let cfg = ModelConfig { batch_norm: bn, ..tiny() };
+            let net = cfg.init(&device).unwrap();
+            let dir = std::env::temp_dir().join(format!("multifit-model-test-{}-{bn}", std::process::id()));
+            std::fs::create_dir_all(&dir).unwrap();
+            let path = dir.join("weights.safetensors");
+            net.save(&path).unwrap();
+            let back = EmbeddingNet::load(&cfg, &path, &device).unwrap();
+            let p = points(11, 4);
+            assert_eq!(net.embed(&p, 4, &device), back.embed(&p, 4, &device));
+            // A card that disagrees with the weights is refused.
+            let wrong = ModelConfig { width: 8, ..cfg.clone() };
+            assert!(matches!(EmbeddingNet::load(&wrong, &path, &device), Err(ModelError::Load { .. })));
+            let deeper = ModelConfig { depth: 3, ..cfg.clone() };
+            assert!(matches!(EmbeddingNet::load(&deeper, &path, &device), Err(ModelError::Load { .. })));
+            std::fs::remove_dir_all(&dir).unwrap();
+        }
+    }
+
+    #[test]
+    fn rejects_bad_configs() {
+        assert!(ModelConfig { embed_dim: 1, ..tiny() }.validate().is_err());
+        assert!(ModelConfig { width: 0, ..tiny() }.validate().is_err());
+        assert!(ModelConfig { cn_epsilon: 0.0, ..tiny() }.validate().is_err());
+    }
+}

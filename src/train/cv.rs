@@ -1,0 +1,165 @@
+//! Leave-one-sequence-out cross-validation (the paper's protocol for KT3DMoSeg and AdelaideRMF).
+//!
+//! For each sequence: train on the others, test on it. Trajectory sequences are cut into clips
+//! of `clip_len` frames: the test clip is frames 1..clip_len of the held-out sequence; 'vanilla'
+//! trains on the first clip of every other sequence, 'augment' on every non-overlapping clip of
+//! every other sequence. No clip of the held-out sequence is ever seen in training.
+//! Correspondence sequences are used whole. Each finished fold is written to
+//! `<out>/folds/<name>.json` and is not retrained when the run is restarted.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command};
+
+use serde::{Deserialize, Serialize};
+
+use super::eval::{EvalRow, EvalSettings, evaluate_sample};
+use super::{Hooks, TrainConfig, TrainError, prepare, train};
+use crate::data::{Kind, Normalization, Sample, Sequence};
+use crate::registry::{LoadedModel, ModelCard, TrainingInfo};
+
+/// Which training clips a fold uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum Protocol {
+    /// The test clip (first `clip_len` frames) of every other sequence.
+    Vanilla,
+    /// Every non-overlapping clip of every other sequence.
+    Augment,
+}
+
+/// One finished fold.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FoldResult {
+    pub row: EvalRow,
+    pub train_samples: usize,
+    pub train_seconds: f64,
+    pub best_epoch: usize,
+}
+
+/// The test sample of a sequence.
+pub fn test_sample(seq: &Sequence, clip_len: usize) -> Option<Sample> {
+    match seq.points.kind() {
+        Kind::Trajectories => seq.clip(0, clip_len),
+        _ => Some(seq.sample()),
+    }
+}
+
+/// The training samples a sequence contributes to the folds that do not hold it out.
+pub fn train_samples(seq: &Sequence, protocol: Protocol, clip_len: usize) -> Vec<Sample> {
+    match (seq.points.kind(), protocol) {
+        (Kind::Trajectories, Protocol::Vanilla) => seq.clip(0, clip_len).into_iter().collect(),
+        (Kind::Trajectories, Protocol::Augment) => seq.clips(clip_len),
+        _ => vec![seq.sample()],
+    }
+}
+
+/// A cross-validation run.
+#[derive(Debug, Clone)]
+pub struct CvSpec {
+    pub train: TrainConfig,
+    pub protocol: Protocol,
+    pub clip_len: usize,
+    pub eval: EvalSettings,
+    pub out: PathBuf,
+}
+
+fn fold_path(out: &Path, name: &str) -> PathBuf {
+    out.join("folds").join(format!("{name}.json"))
+}
+
+/// The saved result of a fold, if it finished before.
+pub fn finished_fold(out: &Path, name: &str) -> Option<FoldResult> {
+    let text = std::fs::read_to_string(fold_path(out, name)).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
+/// A model card for a network trained in this process (used for folds and `train`).
+pub fn card_for(name: &str, kind: Kind, config: &TrainConfig, k_max: usize, training: TrainingInfo) -> ModelCard {
+    ModelCard {
+        name: name.to_string(),
+        version: "1".into(),
+        kind,
+        input_dim: config.model.input_dim,
+        normalization: Normalization::for_kind(kind),
+        architecture: config.model.clone(),
+        loss: config.loss,
+        k_max,
+        selection: crate::cluster::Selection::Sod,
+        training,
+        metrics: vec![],
+        multifit_version: env!("CARGO_PKG_VERSION").into(),
+        git_commit: None,
+    }
+}
+
+/// Trains on every sequence but `held_out` and evaluates on `held_out`'s test sample.
+/// Writes the result to `<out>/folds/<name>.json`; returns the saved result when it exists.
+pub fn run_fold(spec: &CvSpec, seqs: &[Sequence], held_out: usize) -> Result<FoldResult, TrainError> {
+    let name = &seqs[held_out].name;
+    if let Some(done) = finished_fold(&spec.out, name) {
+        return Ok(done);
+    }
+    let test = test_sample(&seqs[held_out], spec.clip_len)
+        .ok_or_else(|| TrainError::Sample { name: name.clone(), reason: "no test clip".into() })?;
+    let kind = test.points.kind();
+    let train_set: Vec<Sample> = seqs
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| *i != held_out)
+        .flat_map(|(_, s)| train_samples(s, spec.protocol, spec.clip_len))
+        .collect();
+    let prepared = prepare(&train_set, Normalization::for_kind(kind));
+    let outcome = train(&spec.train, &prepared, &[], Hooks::default())?;
+    let info = TrainingInfo {
+        data: format!("fold without {name}"),
+        command: String::new(),
+        epochs: spec.train.epochs,
+        learning_rate: spec.train.learning_rate,
+        seed: spec.train.seed,
+        seconds: outcome.seconds,
+        machine: String::new(),
+    };
+    let card = card_for(&format!("fold-{name}"), kind, &spec.train, spec.eval.k_max, info);
+    let model = LoadedModel::from_parts(card, outcome.net, crate::model::cpu_device());
+    let row = evaluate_sample(&model, &test, &spec.eval)
+        .map_err(|e| TrainError::Sample { name: name.clone(), reason: e.to_string() })?;
+    let result = FoldResult { row, train_samples: prepared.len(), train_seconds: outcome.seconds, best_epoch: outcome.best_epoch };
+    let path = fold_path(&spec.out, name);
+    let write = || -> std::io::Result<()> {
+        std::fs::create_dir_all(path.parent().expect("folds dir"))?;
+        let tmp = path.with_extension("json.tmp");
+        std::fs::write(&tmp, serde_json::to_string_pretty(&result).map_err(std::io::Error::other)?)?;
+        std::fs::rename(&tmp, &path)
+    };
+    write().map_err(|e| TrainError::Checkpoint { path: path.clone(), reason: e.to_string() })?;
+    Ok(result)
+}
+
+/// Runs `exe <args> --fold <name>` for every unfinished fold, at most `jobs` at a time, each child
+/// limited to one compute thread (two one-thread processes train faster here than one
+/// two-thread process). Returns the names of folds whose process failed.
+pub fn run_in_processes(exe: &Path, args: &[String], out: &Path, names: &[String], jobs: usize) -> std::io::Result<Vec<String>> {
+    let mut pending: Vec<&String> = names.iter().filter(|n| finished_fold(out, n).is_none()).rev().collect();
+    let mut running: Vec<(String, Child)> = Vec::new();
+    let mut failed = Vec::new();
+    while !pending.is_empty() || !running.is_empty() {
+        while running.len() < jobs.max(1) {
+            let Some(name) = pending.pop() else { break };
+            let child = Command::new(exe).args(args).arg("--fold").arg(name).env("RAYON_NUM_THREADS", "1").spawn()?;
+            running.push((name.clone(), child));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(200));
+        let mut i = 0;
+        while i < running.len() {
+            if let Some(status) = running[i].1.try_wait()? {
+                let (name, _) = running.swap_remove(i);
+                if !status.success() {
+                    failed.push(name);
+                }
+            } else {
+                i += 1;
+            }
+        }
+    }
+    Ok(failed)
+}
