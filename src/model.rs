@@ -34,6 +34,10 @@ pub struct ModelConfig {
     pub batch_norm: bool,
     /// Epsilon added to the variance in Context Normalization.
     pub cn_epsilon: f64,
+    /// Offsets to this many nearest neighbours appended to every point (0 = the paper's input;
+    /// see [`crate::data::features`]).
+    #[serde(default)]
+    pub neighbors: usize,
 }
 
 /// Why a model could not be built, saved or loaded.
@@ -49,7 +53,12 @@ pub enum ModelError {
 
 impl ModelConfig {
     pub fn new(input_dim: usize) -> Self {
-        Self { input_dim, width: 128, depth: 12, embed_dim: 6, batch_norm: false, cn_epsilon: 1e-3 }
+        Self { input_dim, width: 128, depth: 12, embed_dim: 6, batch_norm: false, cn_epsilon: 1e-3, neighbors: 0 }
+    }
+
+    /// Values per point the first layer takes: `input_dim * (1 + neighbors)`.
+    pub fn feature_dim(&self) -> usize {
+        self.input_dim * (1 + self.neighbors)
     }
 
     pub fn validate(&self) -> Result<(), ModelError> {
@@ -59,6 +68,9 @@ impl ModelConfig {
         }
         if self.width == 0 || self.width > 4096 {
             return bad("width must be in 1..=4096");
+        }
+        if self.neighbors > 64 {
+            return bad("neighbors must be at most 64");
         }
         if self.depth > 256 {
             return bad("depth must be at most 256");
@@ -86,7 +98,7 @@ impl ModelConfig {
             })
             .collect();
         Ok(EmbeddingNet {
-            input: LinearConfig::new(self.input_dim, w).init(device),
+            input: LinearConfig::new(self.feature_dim(), w).init(device),
             blocks,
             output: LinearConfig::new(w, self.embed_dim).init(device),
             cn_epsilon: self.cn_epsilon,
@@ -95,7 +107,7 @@ impl ModelConfig {
 
     /// Multiply-adds per point of one forward pass (for FLOP accounting in benchmarks).
     pub fn macs_per_point(&self) -> usize {
-        self.input_dim * self.width + 2 * self.depth * self.width * self.width + self.width * self.embed_dim
+        self.feature_dim() * self.width + 2 * self.depth * self.width * self.width + self.width * self.embed_dim
     }
 }
 
@@ -215,7 +227,7 @@ mod tests {
     use super::*;
 
     fn tiny() -> ModelConfig {
-        ModelConfig { input_dim: 4, width: 16, depth: 2, embed_dim: 3, batch_norm: false, cn_epsilon: 1e-3 }
+        ModelConfig { input_dim: 4, width: 16, depth: 2, embed_dim: 3, batch_norm: false, cn_epsilon: 1e-3, neighbors: 0 }
     }
 
     fn points(n: usize, d: usize) -> Vec<f32> {

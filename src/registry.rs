@@ -9,6 +9,7 @@ use burn::prelude::Device;
 use serde::{Deserialize, Serialize};
 
 use crate::cluster::{self, ClusterError, ClusterParams, Clustering, Points, Selection};
+use crate::data::features::with_neighbors;
 use crate::data::{ImageSize, Kind, Normalization, PointSet};
 use crate::loss::Loss;
 use crate::model::{EmbeddingNet, ModelConfig, ModelError, cpu_device};
@@ -166,7 +167,8 @@ impl LoadedModel {
         Self { card, net, device }
     }
 
-    /// Normalised network input for `points`, checking kind and width: row-major `[n, d]`.
+    /// Network input for `points` (normalised, neighbour offsets appended), checking kind and
+    /// width: row-major `[n, feature_dim]`.
     pub fn prepare(&self, points: &PointSet, image: Option<ImageSize>) -> Result<Vec<f32>, FitError> {
         if points.kind() != self.card.kind {
             return Err(FitError::WrongKind { model: self.card.name.clone(), expected: self.card.kind, found: points.kind() });
@@ -174,12 +176,13 @@ impl LoadedModel {
         if points.dim() != self.card.input_dim {
             return Err(FitError::WrongDim { model: self.card.name.clone(), expected: self.card.input_dim, found: points.dim() });
         }
-        Ok(self.card.normalization.apply(points, image))
+        let normalised = self.card.normalization.apply(points, image);
+        Ok(with_neighbors(&normalised, self.card.input_dim, self.card.architecture.neighbors))
     }
 
-    /// Embeddings of normalised input `[n, d]` -> `[n, e]`.
-    pub fn embed(&self, normalised: &[f32]) -> Vec<f32> {
-        self.net.embed(normalised, self.card.input_dim, &self.device)
+    /// Embeddings of prepared input `[n, feature_dim]` -> `[n, e]`.
+    pub fn embed(&self, features: &[f32]) -> Vec<f32> {
+        self.net.embed(features, self.card.architecture.feature_dim(), &self.device)
     }
 
     /// Normalise, embed and cluster one point set.

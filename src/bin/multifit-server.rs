@@ -97,7 +97,13 @@ fn main() -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    match runtime.block_on(serve(config, |_| {})) {
+    // The bound address on stdout, one line (scripts and tests read it when --addr has port 0).
+    let announce = |addr| {
+        use std::io::Write;
+        println!("multifit-server listening on http://{addr}");
+        let _ = std::io::stdout().flush();
+    };
+    match runtime.block_on(serve(config, announce)) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             tracing::error!("{e}");

@@ -97,6 +97,9 @@ struct TrainArgs {
     /// BatchNorm after Context Normalization (CNe).
     #[arg(long)]
     batch_norm: bool,
+    /// Append offsets to this many nearest neighbours to every point (0 = the paper's input).
+    #[arg(long, default_value_t = 0)]
+    neighbors: usize,
     #[arg(long, default_value_t = 1e-3)]
     lr: f64,
     #[arg(long, value_enum, default_value = "cosine")]
@@ -204,6 +207,7 @@ impl TrainArgs {
                 embed_dim: self.embed_dim,
                 batch_norm: self.batch_norm,
                 cn_epsilon: 1e-3,
+                neighbors: self.neighbors,
             },
             loss,
             learning_rate: self.lr,
@@ -308,7 +312,8 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
     let input_dim = train_samples.first().context("no training samples")?.points.dim();
     let config = a.train.config(input_dim)?;
     let norm = Normalization::for_kind(kind);
-    let (train_set, val_set) = (prepare(&train_samples, norm), prepare(&val_samples, norm));
+    let k = config.model.neighbors;
+    let (train_set, val_set) = (prepare(&train_samples, norm, k), prepare(&val_samples, norm, k));
     let out = a.out.clone().unwrap_or_else(|| Path::new("models").join(&a.name));
     let run_dir = a.run_dir.clone().unwrap_or_else(|| Path::new("runs").join(&a.name));
     std::fs::create_dir_all(&run_dir)?;

@@ -1,6 +1,7 @@
 //! Inputs: validated point sets, normalisation, labelled datasets and synthetic generators.
 
 pub mod dataset;
+pub mod features;
 pub mod points;
 pub mod synthetic;
 

@@ -108,7 +108,7 @@ pub fn run_fold(spec: &CvSpec, seqs: &[Sequence], held_out: usize) -> Result<Fol
         .filter(|(i, _)| *i != held_out)
         .flat_map(|(_, s)| train_samples(s, spec.protocol, spec.clip_len))
         .collect();
-    let prepared = prepare(&train_set, Normalization::for_kind(kind));
+    let prepared = prepare(&train_set, Normalization::for_kind(kind), spec.train.model.neighbors);
     let outcome = train(&spec.train, &prepared, &[], Hooks::default())?;
     let info = TrainingInfo {
         data: format!("fold without {name}"),

@@ -20,6 +20,7 @@ use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
 use crate::cluster::{ClusterParams, Points, Selection, cluster};
+use crate::data::features::with_neighbors;
 use crate::data::{Normalization, Sample};
 use crate::loss::{Loss, one_hot};
 use crate::metrics::error_rate;
@@ -104,8 +105,9 @@ impl TrainConfig {
 #[derive(Debug, Clone)]
 pub struct Prepared {
     pub name: String,
-    /// Row-major `[n, dim]`.
+    /// Row-major `[n, dim]` network input (features).
     pub input: Vec<f32>,
+    /// Values per point of `input` (the model's feature dimension).
     pub dim: usize,
     pub labels: Vec<usize>,
     pub k: usize,
@@ -117,14 +119,15 @@ impl Prepared {
     }
 }
 
-/// Normalises samples as the model will see them at serving time.
-pub fn prepare(samples: &[Sample], normalization: Normalization) -> Vec<Prepared> {
+/// Normalises samples (and appends `neighbors` neighbour offsets) as the model will see them at
+/// serving time.
+pub fn prepare(samples: &[Sample], normalization: Normalization, neighbors: usize) -> Vec<Prepared> {
     samples
         .iter()
         .map(|s| Prepared {
             name: s.name.clone(),
-            input: normalization.apply(&s.points, s.image_size),
-            dim: s.points.dim(),
+            input: with_neighbors(&normalization.apply(&s.points, s.image_size), s.points.dim(), neighbors),
+            dim: s.points.dim() * (1 + neighbors),
             labels: s.labels.clone(),
             k: s.k,
         })
@@ -238,10 +241,10 @@ pub fn train(config: &TrainConfig, train: &[Prepared], val: &[Prepared], mut hoo
         return Err(TrainError::NoSamples);
     }
     for s in train.iter().chain(val) {
-        if s.dim != config.model.input_dim {
+        if s.dim != config.model.feature_dim() {
             return Err(TrainError::Sample {
                 name: s.name.clone(),
-                reason: format!("rows of {} values, the model takes {}", s.dim, config.model.input_dim),
+                reason: format!("rows of {} values, the model takes {}", s.dim, config.model.feature_dim()),
             });
         }
         if s.labels.iter().any(|&l| l >= s.k) || s.n() < 2 {
@@ -374,7 +377,7 @@ mod tests {
 
     fn tiny_config(loss: Loss) -> TrainConfig {
         TrainConfig {
-            model: ModelConfig { input_dim: 2, width: 16, depth: 1, embed_dim: 3, batch_norm: false, cn_epsilon: 1e-3 },
+            model: ModelConfig { input_dim: 2, width: 16, depth: 1, embed_dim: 3, batch_norm: false, cn_epsilon: 1e-3, neighbors: 0 },
             loss,
             learning_rate: 1e-2,
             schedule: Schedule::Constant,
@@ -390,7 +393,7 @@ mod tests {
         let mut g = LceGenerator::new(seed, cfg);
         let samples: Vec<Sample> =
             (0..count).map(|i| g.with_shapes(&[Shape::Line, Shape::Circle], &i.to_string()).sample).collect();
-        prepare(&samples, Normalization::CentroidUnitRms)
+        prepare(&samples, Normalization::CentroidUnitRms, 0)
     }
 
     #[test]

@@ -1,0 +1,165 @@
+//! Shared helpers of the integration tests: start the real server binary on 127.0.0.1:0 and talk
+//! HTTP/1.1 to it.
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader, Read};
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use http_body_util::{BodyExt, Full};
+use hyper::body::Bytes;
+use hyper_util::rt::TokioIo;
+use serde_json::Value;
+
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+pub fn datasets() -> PathBuf {
+    repo().join("..").join("shared").join("datasets")
+}
+
+/// A running `multifit-server` process, killed on drop.
+pub struct Server {
+    pub addr: SocketAddr,
+    pub child: Child,
+    stderr: Option<std::thread::JoinHandle<String>>,
+}
+
+impl Server {
+    /// Starts the server with the shipped models and extra flags; waits until it is ready.
+    pub fn start(extra: &[&str]) -> Server {
+        let models = repo().join("models");
+        Self::start_with_models(&models, extra)
+    }
+
+    pub fn start_with_models(models: &Path, extra: &[&str]) -> Server {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_multifit-server"))
+            .arg("--addr")
+            .arg("127.0.0.1:0")
+            .arg("--models")
+            .arg(models)
+            .args(extra)
+            .env("RUST_LOG", "warn")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start multifit-server");
+        let stderr = child.stderr.take().expect("stderr");
+        let stderr = std::thread::spawn(move || {
+            let mut s = String::new();
+            let _ = BufReader::new(stderr).read_to_string(&mut s);
+            s
+        });
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().expect("stdout")).read_line(&mut line).expect("read stdout");
+        let addr = line.trim().rsplit("http://").next().and_then(|a| a.parse().ok()).unwrap_or_else(|| {
+            panic!("no address announced: {line:?}")
+        });
+        let server = Server { addr, child, stderr: Some(stderr) };
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while Instant::now() < deadline {
+            if let Ok((200, _)) = server.try_get("/health/ready") {
+                return server;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        panic!("server did not become ready");
+    }
+
+    fn try_get(&self, path: &str) -> Result<(u16, Value), String> {
+        let r = send(self.addr, "GET", path, None, Vec::new())?;
+        Ok((r.status, r.json()))
+    }
+
+    pub fn get(&self, path: &str) -> Response {
+        send(self.addr, "GET", path, None, Vec::new()).expect("GET")
+    }
+
+    pub fn post_json(&self, path: &str, body: &Value) -> Response {
+        self.post_raw(path, Some("application/json"), serde_json::to_vec(body).unwrap())
+    }
+
+    pub fn post_raw(&self, path: &str, content_type: Option<&str>, body: Vec<u8>) -> Response {
+        send(self.addr, "POST", path, content_type, body).expect("POST")
+    }
+
+    /// Sends SIGTERM and waits for the exit status; returns (status code, stderr).
+    pub fn terminate(mut self) -> (Option<i32>, String) {
+        let pid = self.child.id().to_string();
+        Command::new("kill").args(["-TERM", &pid]).status().expect("kill");
+        let status = self.child.wait().expect("wait");
+        let stderr = self.stderr.take().map(|h| h.join().unwrap_or_default()).unwrap_or_default();
+        (status.code(), stderr)
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// An HTTP answer.
+pub struct Response {
+    pub status: u16,
+    pub headers: hyper::HeaderMap,
+    pub body: Vec<u8>,
+}
+
+impl Response {
+    pub fn json(&self) -> Value {
+        serde_json::from_slice(&self.body).unwrap_or(Value::Null)
+    }
+    pub fn text(&self) -> String {
+        String::from_utf8_lossy(&self.body).into_owned()
+    }
+    /// The error code of an error answer (panics when the body is not the error shape).
+    pub fn error_code(&self) -> String {
+        let v = self.json();
+        let code = v["error"]["code"].as_str().unwrap_or_else(|| panic!("not an error body: {}", self.text()));
+        assert!(v["error"]["message"].is_string(), "error without message: {v}");
+        code.to_string()
+    }
+}
+
+/// One HTTP/1.1 request over a fresh connection.
+pub fn send(addr: SocketAddr, method: &str, path: &str, content_type: Option<&str>, body: Vec<u8>) -> Result<Response, String> {
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().map_err(|e| e.to_string())?;
+    rt.block_on(async move {
+        let stream = tokio::net::TcpStream::connect(addr).await.map_err(|e| e.to_string())?;
+        let (mut sender, conn) =
+            hyper::client::conn::http1::handshake(TokioIo::new(stream)).await.map_err(|e| e.to_string())?;
+        tokio::spawn(conn);
+        let mut req = hyper::Request::builder().method(method).uri(path).header("host", addr.to_string());
+        if let Some(ct) = content_type {
+            req = req.header("content-type", ct);
+        }
+        let req = req.body(Full::new(Bytes::from(body))).map_err(|e| e.to_string())?;
+        let res = sender.send_request(req).await.map_err(|e| e.to_string())?;
+        let status = res.status().as_u16();
+        let headers = res.headers().clone();
+        let body = res.into_body().collect().await.map_err(|e| e.to_string())?.to_bytes().to_vec();
+        Ok(Response { status, headers, body })
+    })
+}
+
+/// A dataset sequence file as JSON.
+pub fn dataset(rel: &str) -> Value {
+    let path = datasets().join(rel);
+    serde_json::from_slice(&std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
+}
+
+/// Labels of a fit answer.
+pub fn labels(v: &Value) -> Vec<usize> {
+    v["labels"].as_array().expect("labels").iter().map(|l| l.as_u64().unwrap() as usize).collect()
+}
+
+/// Ground-truth labels of a dataset file, renumbered 0..K.
+pub fn truth(v: &Value) -> Vec<usize> {
+    let raw: Vec<i64> = v["labels"].as_array().unwrap().iter().map(|l| l.as_i64().unwrap()).collect();
+    multifit::data::dataset::renumber(&raw).0
+}
