@@ -23,7 +23,9 @@ fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {
 }
 
 fn pseudo(n: usize, salt: usize) -> Vec<f32> {
-    (0..n).map(|i| (((i * 7919 + salt * 104729) % 2003) as f32 / 1001.5) - 1.0).collect()
+    (0..n)
+        .map(|i| (((i * 7919 + salt * 104729) % 2003) as f32 / 1001.5) - 1.0)
+        .collect()
 }
 
 fn main() {
@@ -34,7 +36,15 @@ fn main() {
     let threads = std::env::var("RAYON_NUM_THREADS").unwrap_or_else(|_| "all".into());
     println!("multifit core benchmarks (median of {reps}; rayon threads: {threads})");
 
-    let cfg = ModelConfig { input_dim: 4, width: 128, depth: 12, embed_dim: 6, batch_norm: false, cn_epsilon: 1e-3, neighbors: 0 };
+    let cfg = ModelConfig {
+        input_dim: 4,
+        width: 128,
+        depth: 12,
+        embed_dim: 6,
+        batch_norm: false,
+        cn_epsilon: 1e-3,
+        neighbors: 0,
+    };
     let net = cfg.init(&device).expect("config");
     for n in [1000, 5000] {
         let x = pseudo(n * 4, n);
@@ -42,7 +52,9 @@ fn main() {
             std::hint::black_box(net.embed(&x, 4, &device));
         });
         let gflops = 2.0 * cfg.macs_per_point() as f64 * n as f64 / (ms * 1e-3) / 1e9;
-        println!("forward  N={n:>5}  width 128, 12 blocks, D=4, E=6: {ms:>8.2} ms  ({gflops:.1} GFLOP/s in matmuls)");
+        println!(
+            "forward  N={n:>5}  width 128, 12 blocks, D=4, E=6: {ms:>8.2} ms  ({gflops:.1} GFLOP/s in matmuls)"
+        );
     }
 
     for n in [1000, 5000] {
@@ -54,17 +66,29 @@ fn main() {
             row.iter_mut().for_each(|v| *v /= len);
         }
         for sel in [Selection::Sod, Selection::Silhouette] {
-            let p = ClusterParams::builder().k_max(8).selection(sel).seed(1).build().unwrap();
+            let p = ClusterParams::builder()
+                .k_max(8)
+                .selection(sel)
+                .seed(1)
+                .build()
+                .unwrap();
             let ms = median_ms(reps, || {
                 std::hint::black_box(cluster(Points::new(&z, 6).unwrap(), &p).unwrap());
             });
-            println!("cluster  N={n:>5}  K=1..8, 4 restarts, {:<10}: {ms:>8.2} ms", sel.name());
+            println!(
+                "cluster  N={n:>5}  K=1..8, 4 restarts, {:<10}: {ms:>8.2} ms",
+                sel.name()
+            );
         }
     }
 
     let ad = device.clone().autodiff();
     ad.seed(0);
-    let tcfg = ModelConfig { input_dim: 10, embed_dim: 5, ..cfg };
+    let tcfg = ModelConfig {
+        input_dim: 10,
+        embed_dim: 5,
+        ..cfg
+    };
     let mut model = tcfg.init(&ad).expect("config");
     let mut optim = AdamConfig::new().init();
     for n in [500, 1000] {
@@ -77,6 +101,9 @@ fn main() {
             let grads = GradientsParams::from_grads(loss.backward(), &model);
             model = optim.step(1e-4, model.clone(), grads);
         });
-        println!("train    N={n:>5}  fwd+bwd+Adam, MIMI, width 128, 12 blocks: {ms:>8.2} ms/step  ({:.1} steps/s)", 1e3 / ms);
+        println!(
+            "train    N={n:>5}  fwd+bwd+Adam, MIMI, width 128, 12 blocks: {ms:>8.2} ms/step  ({:.1} steps/s)",
+            1e3 / ms
+        );
     }
 }

@@ -177,7 +177,11 @@ pub struct Points<'a> {
 
 impl<'a> Points<'a> {
     pub fn new(data: &'a [f32], dim: usize) -> Result<Self, ClusterError> {
-        if dim == 0 || data.is_empty() || data.len() % dim != 0 || data.iter().any(|v| !v.is_finite()) {
+        if dim == 0
+            || data.is_empty()
+            || data.len() % dim != 0
+            || data.iter().any(|v| !v.is_finite())
+        {
             return Err(ClusterError::BadEmbeddings);
         }
         Ok(Self { data, dim })
@@ -208,7 +212,9 @@ fn kmeans_pp(p: Points, k: usize, rng: &mut ChaCha8Rng) -> Vec<f64> {
     let mut centroids: Vec<f64> = Vec::with_capacity(k * p.dim);
     let first = rng.random_range(0..n);
     centroids.extend(p.row(first).iter().map(|&v| v as f64));
-    let mut d2: Vec<f64> = (0..n).map(|i| sq_dist(p.row(i), &centroids[..p.dim])).collect();
+    let mut d2: Vec<f64> = (0..n)
+        .map(|i| sq_dist(p.row(i), &centroids[..p.dim]))
+        .collect();
     for c in 1..k {
         let total: f64 = d2.iter().sum();
         let pick = if total > 0.0 {
@@ -265,7 +271,9 @@ fn lloyd(p: Points, k: usize, mut centroids: Vec<f64>, max_iter: usize) -> KMean
         for c in 0..k {
             if counts[c] == 0 {
                 // An empty cluster takes the point farthest from its centroid.
-                let far = (0..n).max_by(|&a, &b| dist[a].total_cmp(&dist[b])).unwrap_or(0);
+                let far = (0..n)
+                    .max_by(|&a, &b| dist[a].total_cmp(&dist[b]))
+                    .unwrap_or(0);
                 dist[far] = 0.0;
                 labels[far] = c;
                 for (s, &v) in sums[c * dim..(c + 1) * dim].iter_mut().zip(p.row(far)) {
@@ -279,8 +287,14 @@ fn lloyd(p: Points, k: usize, mut centroids: Vec<f64>, max_iter: usize) -> KMean
         }
         centroids = sums;
     }
-    let residual = (0..n).map(|i| sq_dist(p.row(i), &centroids[labels[i] * dim..(labels[i] + 1) * dim])).sum();
-    KMeans { labels, centroids, residual }
+    let residual = (0..n)
+        .map(|i| sq_dist(p.row(i), &centroids[labels[i] * dim..(labels[i] + 1) * dim]))
+        .sum();
+    KMeans {
+        labels,
+        centroids,
+        residual,
+    }
 }
 
 /// k-means with k-means++ seeding and `restarts` restarts; the lowest residual is kept.
@@ -312,7 +326,11 @@ pub fn silhouette(p: Points, labels: &[usize], k: usize) -> f64 {
         sums.iter_mut().for_each(|s| *s = 0.0);
         let zi = p.row(i);
         for j in 0..n {
-            let d: f32 = zi.iter().zip(p.row(j)).map(|(a, b)| (a - b) * (a - b)).sum();
+            let d: f32 = zi
+                .iter()
+                .zip(p.row(j))
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum();
             sums[labels[j]] += d.sqrt() as f64;
         }
         let own = labels[i];
@@ -346,7 +364,14 @@ fn silhouette_score(p: Points, labels: &[usize], k: usize, seed: u64) -> f64 {
     idx.truncate(SILHOUETTE_EXACT_MAX);
     let data: Vec<f32> = idx.iter().flat_map(|&i| p.row(i).iter().copied()).collect();
     let sub_labels: Vec<usize> = idx.iter().map(|&i| labels[i]).collect();
-    silhouette(Points { data: &data, dim: p.dim }, &sub_labels, k)
+    silhouette(
+        Points {
+            data: &data,
+            dim: p.dim,
+        },
+        &sub_labels,
+        k,
+    )
 }
 
 /// Relabels clusters by first appearance in input order, so equal partitions give equal labels.
@@ -378,11 +403,13 @@ pub fn sod_scores(residuals: &[(usize, f64)]) -> Vec<(usize, f64)> {
 }
 
 fn argmax(scores: &[(usize, f64)]) -> Option<usize> {
-    scores.iter().fold(None, |best: Option<(usize, f64)>, &(k, s)| match best {
-        Some((_, b)) if b >= s => best,
-        _ => Some((k, s)),
-    })
-    .map(|b| b.0)
+    scores
+        .iter()
+        .fold(None, |best: Option<(usize, f64)>, &(k, s)| match best {
+            Some((_, b)) if b >= s => best,
+            _ => Some((k, s)),
+        })
+        .map(|b| b.0)
 }
 
 /// Clusters embeddings, choosing K as `params` says.
@@ -406,21 +433,40 @@ pub fn cluster(p: Points, params: &ClusterParams) -> Result<Clustering, ClusterE
                 _ => k_max,
             };
             let runs: Vec<KMeans> = (1..=top).map(run).collect();
-            let residuals: Vec<(usize, f64)> =
-                runs.iter().enumerate().map(|(i, r)| (i + 1, r.residual)).collect();
+            let residuals: Vec<(usize, f64)> = runs
+                .iter()
+                .enumerate()
+                .map(|(i, r)| (i + 1, r.residual))
+                .collect();
             let scores: Vec<(usize, f64)> = match selection {
-                Selection::Sod => sod_scores(&residuals).into_iter().filter(|s| s.0 <= k_max).collect(),
-                _ => (2..=k_max).map(|k| (k, silhouette_score(p, &runs[k - 1].labels, k, seed))).collect(),
+                Selection::Sod => sod_scores(&residuals)
+                    .into_iter()
+                    .filter(|s| s.0 <= k_max)
+                    .collect(),
+                _ => (2..=k_max)
+                    .map(|k| (k, silhouette_score(p, &runs[k - 1].labels, k, seed)))
+                    .collect(),
             };
             let single = k_max == 1 || residuals[0].1 / (n as f64) < params.single_spread;
-            let k = if single { 1 } else { argmax(&scores).unwrap_or(k_max) };
+            let k = if single {
+                1
+            } else {
+                argmax(&scores).unwrap_or(k_max)
+            };
             let mut runs = runs;
             (runs.swap_remove(k - 1), residuals, scores)
         }
     };
     let k = chosen.centroids.len() / p.dim;
     let (labels, cluster_sizes) = canonical(&chosen.labels, k);
-    Ok(Clustering { k: cluster_sizes.len(), labels, selection: params.selection, residuals, scores, cluster_sizes })
+    Ok(Clustering {
+        k: cluster_sizes.len(),
+        labels,
+        selection: params.selection,
+        residuals,
+        scores,
+        cluster_sizes,
+    })
 }
 
 #[cfg(test)]
@@ -444,7 +490,11 @@ mod tests {
     }
 
     fn params(sel: Selection) -> ClusterParams {
-        ClusterParams::builder().selection(sel).seed(9).build().unwrap()
+        ClusterParams::builder()
+            .selection(sel)
+            .seed(9)
+            .build()
+            .unwrap()
     }
 
     #[test]
@@ -484,7 +534,10 @@ mod tests {
             assert!(w[1].1 <= w[0].1 + 1e-9, "{:?}", c.residuals);
         }
         assert_eq!(c.cluster_sizes.iter().sum::<usize>(), 90);
-        assert_eq!(c.scores.iter().map(|s| s.0).collect::<Vec<_>>(), (2..=8).collect::<Vec<_>>());
+        assert_eq!(
+            c.scores.iter().map(|s| s.0).collect::<Vec<_>>(),
+            (2..=8).collect::<Vec<_>>()
+        );
     }
 
     #[test]
@@ -509,10 +562,17 @@ mod tests {
         assert_eq!(c.labels, vec![0; 20]);
         // k_max is capped at N.
         let three = [0.0f32, 0.0, 5.0, 5.0, 10.0, 0.0];
-        let c = cluster(Points::new(&three, 2).unwrap(), &params(Selection::Silhouette)).unwrap();
+        let c = cluster(
+            Points::new(&three, 2).unwrap(),
+            &params(Selection::Silhouette),
+        )
+        .unwrap();
         assert!(c.k <= 3 && c.residuals.len() == 3);
         assert_eq!(
-            cluster(Points::new(&three, 2).unwrap(), &params(Selection::Fixed(4))),
+            cluster(
+                Points::new(&three, 2).unwrap(),
+                &params(Selection::Fixed(4))
+            ),
             Err(ClusterError::KOutOfRange { k: 4, n: 3 })
         );
     }
@@ -529,7 +589,11 @@ mod tests {
     #[test]
     fn sod_by_hand() {
         // log r: 0, -2, -2.5, -2.7 -> sod(2) = 0 - 2.5 + 4 = 1.5, sod(3) = -2 - 2.7 + 5 = 0.3.
-        let r: Vec<(usize, f64)> = [0.0, -2.0, -2.5, -2.7].iter().enumerate().map(|(i, l)| (i + 1, f64::exp(*l))).collect();
+        let r: Vec<(usize, f64)> = [0.0, -2.0, -2.5, -2.7]
+            .iter()
+            .enumerate()
+            .map(|(i, l)| (i + 1, f64::exp(*l)))
+            .collect();
         let s = sod_scores(&r);
         assert_eq!(s.len(), 2);
         assert!((s[0].1 - 1.5).abs() < 1e-6 && (s[1].1 - 0.3).abs() < 1e-6);
@@ -538,8 +602,14 @@ mod tests {
 
     #[test]
     fn rejects_bad_params() {
-        assert_eq!(ClusterParams::builder().k_max(0).build(), Err(ClusterError::ZeroKMax));
-        assert_eq!(ClusterParams::builder().restarts(0).build(), Err(ClusterError::ZeroRestarts));
+        assert_eq!(
+            ClusterParams::builder().k_max(0).build(),
+            Err(ClusterError::ZeroKMax)
+        );
+        assert_eq!(
+            ClusterParams::builder().restarts(0).build(),
+            Err(ClusterError::ZeroRestarts)
+        );
         assert!(Points::new(&[1.0, f32::NAN], 1).is_err());
         assert!(Points::new(&[1.0, 2.0, 3.0], 2).is_err());
     }

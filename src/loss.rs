@@ -118,7 +118,9 @@ pub fn max_inter_min_intra(z: Tensor<2>, y: Tensor<2>, alpha: f64) -> Tensor<1> 
     let dist = sq.clone() + sq.transpose() - mu.clone().matmul(mu.transpose()).mul_scalar(2.0);
     // The diagonal is pushed out of the way of the minimum; 1e6 dwarfs any distance of unit vectors.
     let off_diag = dist + Tensor::<2>::eye(k, &device).mul_scalar(1e6);
-    let inter = (off_diag.min().clamp_min(0.0) + LOG_EPS).log().mul_scalar(-alpha);
+    let inter = (off_diag.min().clamp_min(0.0) + LOG_EPS)
+        .log()
+        .mul_scalar(-alpha);
     inter + intra
 }
 
@@ -129,8 +131,9 @@ mod tests {
 
     /// Unit rows from a fixed pattern: [n, e]
     fn unit_rows(n: usize, e: usize, salt: usize) -> Vec<f32> {
-        let mut v: Vec<f32> =
-            (0..n * e).map(|i| (((i + salt) * 7919 % 211) as f32 / 105.0) - 1.0).collect();
+        let mut v: Vec<f32> = (0..n * e)
+            .map(|i| (((i + salt) * 7919 % 211) as f32 / 105.0) - 1.0)
+            .collect();
         for row in v.chunks_mut(e) {
             let len = row.iter().map(|x| x * x).sum::<f32>().sqrt();
             row.iter_mut().for_each(|x| *x /= len);
@@ -214,7 +217,10 @@ mod tests {
         let z = unit_rows(n, e, 3);
         let labels = [0, 1, 2, 0, 1, 2, 2, 2, 0, 1, 1, 0];
         let perm = [5, 3, 11, 0, 7, 1, 9, 2, 10, 4, 8, 6];
-        let zp: Vec<f32> = perm.iter().flat_map(|&i| z[i * e..(i + 1) * e].to_vec()).collect();
+        let zp: Vec<f32> = perm
+            .iter()
+            .flat_map(|&i| z[i * e..(i + 1) * e].to_vec())
+            .collect();
         let rename = [2, 0, 1];
         let lp: Vec<usize> = perm.iter().map(|&i| rename[labels[i]]).collect();
         for loss in LOSSES {
@@ -241,10 +247,15 @@ mod tests {
                 plus[idx] += h;
                 let mut minus = z.clone();
                 minus[idx] -= h;
-                let fd = (eval(loss, &plus, n, e, &labels, k) - eval(loss, &minus, n, e, &labels, k))
+                let fd = (eval(loss, &plus, n, e, &labels, k)
+                    - eval(loss, &minus, n, e, &labels, k))
                     / (2.0 * h as f64);
                 let tol = 2e-3 + 2e-2 * fd.abs();
-                assert!((g[idx] as f64 - fd).abs() < tol, "{loss:?} at {idx}: {} vs {fd}", g[idx]);
+                assert!(
+                    (g[idx] as f64 - fd).abs() < tol,
+                    "{loss:?} at {idx}: {} vs {fd}",
+                    g[idx]
+                );
             }
         }
     }
@@ -252,7 +263,10 @@ mod tests {
     #[test]
     fn perfect_embeddings_score_better_than_mixed_ones() {
         // Three groups on orthogonal axes versus the same points with labels shuffled.
-        let z = [1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0];
+        let z = [
+            1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0,
+            1.0,
+        ];
         for loss in LOSSES {
             let good = eval(loss, &z, 6, 3, &[0, 0, 1, 1, 2, 2], 3);
             let bad = eval(loss, &z, 6, 3, &[0, 1, 2, 0, 1, 2], 3);

@@ -47,8 +47,15 @@ pub fn nmi(truth: &[usize], pred: &[usize]) -> f64 {
     }
     let table = contingency(truth, pred);
     let rows: Vec<f64> = table.iter().map(|r| r.iter().sum::<i64>() as f64).collect();
-    let cols: Vec<f64> = (0..table[0].len()).map(|p| table.iter().map(|r| r[p]).sum::<i64>() as f64).collect();
-    let entropy = |m: &[f64]| -m.iter().filter(|&&c| c > 0.0).map(|&c| c / n * (c / n).ln()).sum::<f64>();
+    let cols: Vec<f64> = (0..table[0].len())
+        .map(|p| table.iter().map(|r| r[p]).sum::<i64>() as f64)
+        .collect();
+    let entropy = |m: &[f64]| {
+        -m.iter()
+            .filter(|&&c| c > 0.0)
+            .map(|&c| c / n * (c / n).ln())
+            .sum::<f64>()
+    };
     let (ht, hp) = (entropy(&rows), entropy(&cols));
     let mut mi = 0.0;
     for (t, row) in table.iter().enumerate() {
@@ -60,7 +67,11 @@ pub fn nmi(truth: &[usize], pred: &[usize]) -> f64 {
         }
     }
     let denom = (ht + hp) / 2.0;
-    if denom <= 0.0 { 1.0 } else { (mi / denom).clamp(0.0, 1.0) }
+    if denom <= 0.0 {
+        1.0
+    } else {
+        (mi / denom).clamp(0.0, 1.0)
+    }
 }
 
 /// Share of samples whose chosen K equals the true K: pairs `(true, chosen)`.
@@ -80,7 +91,11 @@ pub fn mean_median(values: &[f64]) -> (f64, f64) {
     let mut s = values.to_vec();
     s.sort_by(f64::total_cmp);
     let m = s.len() / 2;
-    let median = if s.len() % 2 == 1 { s[m] } else { (s[m - 1] + s[m]) / 2.0 };
+    let median = if s.len() % 2 == 1 {
+        s[m]
+    } else {
+        (s[m - 1] + s[m]) / 2.0
+    };
     (mean, median)
 }
 

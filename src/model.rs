@@ -53,7 +53,15 @@ pub enum ModelError {
 
 impl ModelConfig {
     pub fn new(input_dim: usize) -> Self {
-        Self { input_dim, width: 128, depth: 12, embed_dim: 6, batch_norm: false, cn_epsilon: 1e-3, neighbors: 0 }
+        Self {
+            input_dim,
+            width: 128,
+            depth: 12,
+            embed_dim: 6,
+            batch_norm: false,
+            cn_epsilon: 1e-3,
+            neighbors: 0,
+        }
     }
 
     /// Values per point the first layer takes: `input_dim * (1 + neighbors)`.
@@ -107,7 +115,9 @@ impl ModelConfig {
 
     /// Multiply-adds per point of one forward pass (for FLOP accounting in benchmarks).
     pub fn macs_per_point(&self) -> usize {
-        self.feature_dim() * self.width + 2 * self.depth * self.width * self.width + self.width * self.embed_dim
+        self.feature_dim() * self.width
+            + 2 * self.depth * self.width * self.width
+            + self.width * self.embed_dim
     }
 }
 
@@ -178,20 +188,28 @@ impl EmbeddingNet {
     pub fn embed(&self, points: &[f32], dim: usize, device: &Device) -> Vec<f32> {
         let n = points.len() / dim;
         let x = Tensor::<3>::from_data(TensorData::new(points.to_vec(), [1, n, dim]), device);
-        self.forward(x).into_data().try_to_vec::<f32>().expect("f32 embeddings")
+        self.forward(x)
+            .into_data()
+            .try_to_vec::<f32>()
+            .expect("f32 embeddings")
     }
 
     /// Writes the weights as safetensors.
     pub fn save(&self, path: &Path) -> Result<(), ModelError> {
         let mut store = SafetensorsStore::from_file(path).overwrite(true);
-        self.save_into(&mut store)
-            .map_err(|e| ModelError::Save { path: path.display().to_string(), reason: e.to_string() })
+        self.save_into(&mut store).map_err(|e| ModelError::Save {
+            path: path.display().to_string(),
+            reason: e.to_string(),
+        })
     }
 
     /// Loads weights written by [`EmbeddingNet::save`] into a network built from `config`.
     /// Every tensor must be present, of the right shape, and none may be left over.
     pub fn load(config: &ModelConfig, path: &Path, device: &Device) -> Result<Self, ModelError> {
-        let err = |reason: String| ModelError::Load { path: path.display().to_string(), reason };
+        let err = |reason: String| ModelError::Load {
+            path: path.display().to_string(),
+            reason,
+        };
         if !path.is_file() {
             return Err(err("file not found".into()));
         }
@@ -227,24 +245,41 @@ mod tests {
     use super::*;
 
     fn tiny() -> ModelConfig {
-        ModelConfig { input_dim: 4, width: 16, depth: 2, embed_dim: 3, batch_norm: false, cn_epsilon: 1e-3, neighbors: 0 }
+        ModelConfig {
+            input_dim: 4,
+            width: 16,
+            depth: 2,
+            embed_dim: 3,
+            batch_norm: false,
+            cn_epsilon: 1e-3,
+            neighbors: 0,
+        }
     }
 
     fn points(n: usize, d: usize) -> Vec<f32> {
-        (0..n * d).map(|i| ((i * 7919 % 101) as f32 / 50.0) - 1.0).collect()
+        (0..n * d)
+            .map(|i| ((i * 7919 % 101) as f32 / 50.0) - 1.0)
+            .collect()
     }
 
     #[test]
     fn context_norm_standardises_each_set_and_channel() {
         let device = cpu_device();
         let x = Tensor::<3>::from_data(
-            TensorData::new(vec![1.0f32, 10.0, 3.0, 20.0, 5.0, 60.0, 2.0, 2.0, 2.0, 4.0, 2.0, 6.0], [2, 3, 2]),
+            TensorData::new(
+                vec![
+                    1.0f32, 10.0, 3.0, 20.0, 5.0, 60.0, 2.0, 2.0, 2.0, 4.0, 2.0, 6.0,
+                ],
+                [2, 3, 2],
+            ),
             &device,
         );
         let y: Vec<f32> = context_norm(x, 1e-9).into_data().try_to_vec().unwrap();
         // Set 0, channel 0: 1, 3, 5 -> mean 3, var 8/3.
         let s = (8.0f32 / 3.0).sqrt();
-        assert!((y[0] + 2.0 / s).abs() < 1e-4 && y[2].abs() < 1e-4 && (y[4] - 2.0 / s).abs() < 1e-4);
+        assert!(
+            (y[0] + 2.0 / s).abs() < 1e-4 && y[2].abs() < 1e-4 && (y[4] - 2.0 / s).abs() < 1e-4
+        );
         // Set 1, channel 0 is constant: normalised to 0 (epsilon keeps it finite).
         assert!(y[6].abs() < 1e-3 && y[8].abs() < 1e-3 && y[10].abs() < 1e-3);
         for set in 0..2 {
@@ -284,9 +319,13 @@ mod tests {
         let device = cpu_device();
         device.seed(5);
         for bn in [false, true] {
-            let cfg = ModelConfig { batch_norm: bn, ..tiny() };
+            let cfg = ModelConfig {
+                batch_norm: bn,
+                ..tiny()
+            };
             let net = cfg.init(&device).unwrap();
-            let dir = std::env::temp_dir().join(format!("multifit-model-test-{}-{bn}", std::process::id()));
+            let dir = std::env::temp_dir()
+                .join(format!("multifit-model-test-{}-{bn}", std::process::id()));
             std::fs::create_dir_all(&dir).unwrap();
             let path = dir.join("weights.safetensors");
             net.save(&path).unwrap();
@@ -294,18 +333,44 @@ mod tests {
             let p = points(11, 4);
             assert_eq!(net.embed(&p, 4, &device), back.embed(&p, 4, &device));
             // A card that disagrees with the weights is refused.
-            let wrong = ModelConfig { width: 8, ..cfg.clone() };
-            assert!(matches!(EmbeddingNet::load(&wrong, &path, &device), Err(ModelError::Load { .. })));
-            let deeper = ModelConfig { depth: 3, ..cfg.clone() };
-            assert!(matches!(EmbeddingNet::load(&deeper, &path, &device), Err(ModelError::Load { .. })));
+            let wrong = ModelConfig {
+                width: 8,
+                ..cfg.clone()
+            };
+            assert!(matches!(
+                EmbeddingNet::load(&wrong, &path, &device),
+                Err(ModelError::Load { .. })
+            ));
+            let deeper = ModelConfig {
+                depth: 3,
+                ..cfg.clone()
+            };
+            assert!(matches!(
+                EmbeddingNet::load(&deeper, &path, &device),
+                Err(ModelError::Load { .. })
+            ));
             std::fs::remove_dir_all(&dir).unwrap();
         }
     }
 
     #[test]
     fn rejects_bad_configs() {
-        assert!(ModelConfig { embed_dim: 1, ..tiny() }.validate().is_err());
+        assert!(
+            ModelConfig {
+                embed_dim: 1,
+                ..tiny()
+            }
+            .validate()
+            .is_err()
+        );
         assert!(ModelConfig { width: 0, ..tiny() }.validate().is_err());
-        assert!(ModelConfig { cn_epsilon: 0.0, ..tiny() }.validate().is_err());
+        assert!(
+            ModelConfig {
+                cn_epsilon: 0.0,
+                ..tiny()
+            }
+            .validate()
+            .is_err()
+        );
     }
 }

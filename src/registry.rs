@@ -69,7 +69,10 @@ pub struct ModelCard {
 #[derive(Debug, thiserror::Error)]
 pub enum RegistryError {
     #[error("{path}: cannot read: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: invalid model card: {reason}")]
     Card { path: PathBuf, reason: String },
     #[error(transparent)]
@@ -83,8 +86,16 @@ pub enum RegistryError {
 impl ModelCard {
     /// Checks the card is internally consistent.
     pub fn validate(&self) -> Result<(), String> {
-        if self.name.is_empty() || !self.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
-            return Err(format!("name {:?} must be non-empty ASCII letters, digits, '-' or '_'", self.name));
+        if self.name.is_empty()
+            || !self
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        {
+            return Err(format!(
+                "name {:?} must be non-empty ASCII letters, digits, '-' or '_'",
+                self.name
+            ));
         }
         if self.input_dim != self.architecture.input_dim {
             return Err(format!(
@@ -93,10 +104,16 @@ impl ModelCard {
             ));
         }
         if !self.kind.accepts_dim(self.input_dim) {
-            return Err(format!("input_dim {} is not valid for kind {}", self.input_dim, self.kind));
+            return Err(format!(
+                "input_dim {} is not valid for kind {}",
+                self.input_dim, self.kind
+            ));
         }
         if self.normalization != Normalization::for_kind(self.kind) {
-            return Err(format!("normalization {:?} is not the one kind {} uses", self.normalization, self.kind));
+            return Err(format!(
+                "normalization {:?} is not the one kind {} uses",
+                self.normalization, self.kind
+            ));
         }
         if self.k_max == 0 {
             return Err("k_max must be at least 1".into());
@@ -109,10 +126,16 @@ impl ModelCard {
 
     pub fn read(dir: &Path) -> Result<Self, RegistryError> {
         let path = dir.join(CARD_FILE);
-        let text = std::fs::read_to_string(&path).map_err(|source| RegistryError::Io { path: path.clone(), source })?;
-        let card: ModelCard =
-            serde_json::from_str(&text).map_err(|e| RegistryError::Card { path: path.clone(), reason: e.to_string() })?;
-        card.validate().map_err(|reason| RegistryError::Card { path, reason })?;
+        let text = std::fs::read_to_string(&path).map_err(|source| RegistryError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let card: ModelCard = serde_json::from_str(&text).map_err(|e| RegistryError::Card {
+            path: path.clone(),
+            reason: e.to_string(),
+        })?;
+        card.validate()
+            .map_err(|reason| RegistryError::Card { path, reason })?;
         Ok(card)
     }
 
@@ -135,9 +158,17 @@ pub struct LoadedModel {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FitError {
     #[error("model {model} takes {expected} input, got {found}")]
-    WrongKind { model: String, expected: Kind, found: Kind },
+    WrongKind {
+        model: String,
+        expected: Kind,
+        found: Kind,
+    },
     #[error("model {model} takes rows of {expected} values, got {found}")]
-    WrongDim { model: String, expected: usize, found: usize },
+    WrongDim {
+        model: String,
+        expected: usize,
+        found: usize,
+    },
     #[error(transparent)]
     Cluster(#[from] ClusterError),
 }
@@ -169,24 +200,46 @@ impl LoadedModel {
 
     /// Network input for `points` (normalised, neighbour offsets appended), checking kind and
     /// width: row-major `[n, feature_dim]`.
-    pub fn prepare(&self, points: &PointSet, image: Option<ImageSize>) -> Result<Vec<f32>, FitError> {
+    pub fn prepare(
+        &self,
+        points: &PointSet,
+        image: Option<ImageSize>,
+    ) -> Result<Vec<f32>, FitError> {
         if points.kind() != self.card.kind {
-            return Err(FitError::WrongKind { model: self.card.name.clone(), expected: self.card.kind, found: points.kind() });
+            return Err(FitError::WrongKind {
+                model: self.card.name.clone(),
+                expected: self.card.kind,
+                found: points.kind(),
+            });
         }
         if points.dim() != self.card.input_dim {
-            return Err(FitError::WrongDim { model: self.card.name.clone(), expected: self.card.input_dim, found: points.dim() });
+            return Err(FitError::WrongDim {
+                model: self.card.name.clone(),
+                expected: self.card.input_dim,
+                found: points.dim(),
+            });
         }
         let normalised = self.card.normalization.apply(points, image);
-        Ok(with_neighbors(&normalised, self.card.input_dim, self.card.architecture.neighbors))
+        Ok(with_neighbors(
+            &normalised,
+            self.card.input_dim,
+            self.card.architecture.neighbors,
+        ))
     }
 
     /// Embeddings of prepared input `[n, feature_dim]` -> `[n, e]`.
     pub fn embed(&self, features: &[f32]) -> Vec<f32> {
-        self.net.embed(features, self.card.architecture.feature_dim(), &self.device)
+        self.net
+            .embed(features, self.card.architecture.feature_dim(), &self.device)
     }
 
     /// Normalise, embed and cluster one point set.
-    pub fn fit(&self, points: &PointSet, image: Option<ImageSize>, params: &ClusterParams) -> Result<FitOutcome, FitError> {
+    pub fn fit(
+        &self,
+        points: &PointSet,
+        image: Option<ImageSize>,
+        params: &ClusterParams,
+    ) -> Result<FitOutcome, FitError> {
         if let Selection::Fixed(k) = params.selection()
             && k > points.len()
         {
@@ -212,8 +265,14 @@ impl LoadedModel {
 /// Every model under a directory, by name. Fails on the first directory that cannot be loaded,
 /// naming it: a server must not start with half its models.
 pub fn load_all(root: &Path) -> Result<BTreeMap<String, LoadedModel>, RegistryError> {
-    let entries = std::fs::read_dir(root).map_err(|source| RegistryError::Io { path: root.to_path_buf(), source })?;
-    let mut dirs: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_dir()).collect();
+    let entries = std::fs::read_dir(root).map_err(|source| RegistryError::Io {
+        path: root.to_path_buf(),
+        source,
+    })?;
+    let mut dirs: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir())
+        .collect();
     dirs.sort();
     let mut models = BTreeMap::new();
     for dir in dirs {
@@ -224,7 +283,9 @@ pub fn load_all(root: &Path) -> Result<BTreeMap<String, LoadedModel>, RegistryEr
         }
     }
     if models.is_empty() {
-        return Err(RegistryError::Empty { path: root.to_path_buf() });
+        return Err(RegistryError::Empty {
+            path: root.to_path_buf(),
+        });
     }
     Ok(models)
 }

@@ -9,7 +9,11 @@ fn copy_model(name: &str, to: &Path) -> PathBuf {
     let dst = to.join(name);
     std::fs::create_dir_all(&dst).unwrap();
     for f in ["model.json", "weights.safetensors"] {
-        std::fs::copy(common::repo().join("models").join(name).join(f), dst.join(f)).unwrap();
+        std::fs::copy(
+            common::repo().join("models").join(name).join(f),
+            dst.join(f),
+        )
+        .unwrap();
     }
     dst
 }
@@ -28,8 +32,12 @@ fn expect_refusal(models: &Path, needle: &str) {
         .arg(models)
         .output()
         .expect("run server");
-    let log = String::from_utf8_lossy(&out.stderr).to_string() + &String::from_utf8_lossy(&out.stdout);
-    assert!(!out.status.success(), "server must exit non-zero; log: {log}");
+    let log =
+        String::from_utf8_lossy(&out.stderr).to_string() + &String::from_utf8_lossy(&out.stdout);
+    assert!(
+        !out.status.success(),
+        "server must exit non-zero; log: {log}"
+    );
     assert!(log.contains(needle), "log must name {needle:?}: {log}");
 }
 
@@ -67,7 +75,8 @@ fn card_that_disagrees_with_the_weights() {
     let dir = temp("mismatch");
     let m = copy_model("lce", &dir);
     let card_path = m.join("model.json");
-    let mut card: serde_json::Value = serde_json::from_slice(&std::fs::read(&card_path).unwrap()).unwrap();
+    let mut card: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&card_path).unwrap()).unwrap();
     let width = card["architecture"]["width"].as_u64().unwrap();
     card["architecture"]["width"] = (width / 2).into();
     std::fs::write(&card_path, serde_json::to_vec(&card).unwrap()).unwrap();

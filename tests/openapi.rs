@@ -13,7 +13,11 @@ fn spec() -> Value {
 }
 
 fn keys(v: &Value) -> BTreeSet<String> {
-    v.as_mapping().expect("mapping").keys().map(|k| k.as_str().unwrap().to_string()).collect()
+    v.as_mapping()
+        .expect("mapping")
+        .keys()
+        .map(|k| k.as_str().unwrap().to_string())
+        .collect()
 }
 
 fn schema<'a>(spec: &'a Value, name: &str) -> &'a Value {
@@ -31,19 +35,39 @@ fn every_route_is_documented_and_every_documented_route_exists() {
 #[test]
 fn fit_request_fields_match_the_schema() {
     // serde lists the accepted fields when it meets an unknown one.
-    let err = serde_json::from_str::<FitRequest>(r#"{"kind": "points2d", "zzz": 1}"#).unwrap_err().to_string();
-    let accepted: BTreeSet<String> = err.split("expected one of").nth(1).expect("field list").split(',')
-        .map(|f| f.trim().trim_matches(|c: char| c == '`' || c.is_whitespace()).split('`').next().unwrap().to_string())
+    let err = serde_json::from_str::<FitRequest>(r#"{"kind": "points2d", "zzz": 1}"#)
+        .unwrap_err()
+        .to_string();
+    let accepted: BTreeSet<String> = err
+        .split("expected one of")
+        .nth(1)
+        .expect("field list")
+        .split(',')
+        .map(|f| {
+            f.trim()
+                .trim_matches(|c: char| c == '`' || c.is_whitespace())
+                .split('`')
+                .next()
+                .unwrap()
+                .to_string()
+        })
         .filter(|f| !f.is_empty())
         .collect();
     let spec = spec();
-    assert_eq!(keys(&schema(&spec, "FitRequest")["properties"]), accepted, "{err}");
+    assert_eq!(
+        keys(&schema(&spec, "FitRequest")["properties"]),
+        accepted,
+        "{err}"
+    );
 }
 
 #[test]
 fn fit_response_fields_match_the_schema() {
     let r = FitResponse {
-        model: ModelRef { name: "m".into(), version: "1".into() },
+        model: ModelRef {
+            name: "m".into(),
+            version: "1".into(),
+        },
         labels: vec![0, 1],
         k: 2,
         selection: "sod".into(),
@@ -51,14 +75,26 @@ fn fit_response_fields_match_the_schema() {
         scores: vec![KScore { k: 2, score: 0.5 }],
         cluster_sizes: vec![1, 1],
         embeddings: Some(vec![vec![1.0, 0.0], vec![0.0, 1.0]]),
-        timing_ms: Timing { embed: 1.0, cluster: 1.0, total: 2.0 },
+        timing_ms: Timing {
+            embed: 1.0,
+            cluster: 1.0,
+            total: 2.0,
+        },
     };
     let v = serde_json::to_value(&r).unwrap();
     let sent: BTreeSet<String> = v.as_object().unwrap().keys().cloned().collect();
     let spec = spec();
     let s = schema(&spec, "FitResponse");
     assert_eq!(keys(&s["properties"]), sent);
-    assert_eq!(keys(&s["properties"]["timing_ms"]["properties"]), v["timing_ms"].as_object().unwrap().keys().cloned().collect());
+    assert_eq!(
+        keys(&s["properties"]["timing_ms"]["properties"]),
+        v["timing_ms"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .cloned()
+            .collect()
+    );
     for req in s["required"].as_sequence().unwrap() {
         assert!(sent.contains(req.as_str().unwrap()));
     }
@@ -72,14 +108,34 @@ fn shipped_model_cards_match_the_schema() {
     let arch = keys(&s["properties"]["architecture"]["properties"]);
     for entry in std::fs::read_dir(common::repo().join("models")).unwrap() {
         let path = entry.unwrap().path().join("model.json");
-        let card: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        let card: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
         let have: BTreeSet<String> = card.as_object().unwrap().keys().cloned().collect();
-        assert!(have.is_subset(&props), "{}: undocumented {:?}", path.display(), have.difference(&props).collect::<Vec<_>>());
+        assert!(
+            have.is_subset(&props),
+            "{}: undocumented {:?}",
+            path.display(),
+            have.difference(&props).collect::<Vec<_>>()
+        );
         for req in s["required"].as_sequence().unwrap() {
-            assert!(have.contains(req.as_str().unwrap()), "{}: missing {req:?}", path.display());
+            assert!(
+                have.contains(req.as_str().unwrap()),
+                "{}: missing {req:?}",
+                path.display()
+            );
         }
-        let a: BTreeSet<String> = card["architecture"].as_object().unwrap().keys().cloned().collect();
-        assert!(a.is_subset(&arch), "{}: architecture {:?}", path.display(), a);
+        let a: BTreeSet<String> = card["architecture"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .cloned()
+            .collect();
+        assert!(
+            a.is_subset(&arch),
+            "{}: architecture {:?}",
+            path.display(),
+            a
+        );
     }
 }
 
@@ -88,6 +144,12 @@ fn error_shape_is_documented() {
     let spec = spec();
     let e = schema(&spec, "Error");
     let body = multifit::api::ApiError::not_found("x").body();
-    assert_eq!(keys(&e["properties"]), body.as_object().unwrap().keys().cloned().collect());
-    assert_eq!(keys(&e["properties"]["error"]["properties"]), body["error"].as_object().unwrap().keys().cloned().collect());
+    assert_eq!(
+        keys(&e["properties"]),
+        body.as_object().unwrap().keys().cloned().collect()
+    );
+    assert_eq!(
+        keys(&e["properties"]["error"]["properties"]),
+        body["error"].as_object().unwrap().keys().cloned().collect()
+    );
 }

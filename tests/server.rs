@@ -26,13 +26,26 @@ fn check_fit(v: &Value, n: usize) -> usize {
     let k = v["k"].as_u64().unwrap() as usize;
     assert!(k >= 1 && k <= n);
     assert!(l.iter().all(|&x| x < k), "labels in 0..k");
-    let sizes: Vec<u64> = v["cluster_sizes"].as_array().unwrap().iter().map(|s| s.as_u64().unwrap()).collect();
+    let sizes: Vec<u64> = v["cluster_sizes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_u64().unwrap())
+        .collect();
     assert_eq!(sizes.len(), k);
     assert_eq!(sizes.iter().sum::<u64>() as usize, n);
-    let r: Vec<f64> = v["residuals"].as_array().unwrap().iter().map(|r| r["r"].as_f64().unwrap()).collect();
+    let r: Vec<f64> = v["residuals"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["r"].as_f64().unwrap())
+        .collect();
     assert!(!r.is_empty());
     for w in r.windows(2) {
-        assert!(w[1] <= w[0] * (1.0 + 1e-9) + 1e-9, "residuals must not increase: {r:?}");
+        assert!(
+            w[1] <= w[0] * (1.0 + 1e-9) + 1e-9,
+            "residuals must not increase: {r:?}"
+        );
     }
     assert!(v["timing_ms"]["total"].as_f64().unwrap() >= v["timing_ms"]["embed"].as_f64().unwrap());
     k
@@ -52,17 +65,24 @@ fn fits_a_real_kt3dmoseg_sequence() {
     assert_eq!(v["selection"], "sod");
 
     // Known K: the shipped model separates the motions far better than chance.
-    let known = server.post_json("/v1/fit", &fit_body(&file, json!({"k": file["num_models"], "seed": 3})));
+    let known = server.post_json(
+        "/v1/fit",
+        &fit_body(&file, json!({"k": file["num_models"], "seed": 3})),
+    );
     assert_eq!(known.status, 200);
     let err = error_rate(&truth(&file), &labels(&known.json()));
     assert!(err < 0.25, "error {err}");
 
     // Same input and seed, same answer; the trajectory-matrix layout gives the same labels.
-    let again = server.post_json("/v1/fit", &fit_body(&file, json!({"k": file["num_models"], "seed": 3})));
+    let again = server.post_json(
+        "/v1/fit",
+        &fit_body(&file, json!({"k": file["num_models"], "seed": 3})),
+    );
     assert_eq!(labels(&again.json()), labels(&known.json()));
     let rows = file["points"].as_array().unwrap();
-    let matrix: Vec<Vec<f64>> =
-        (0..10).map(|c| rows.iter().map(|r| r[c].as_f64().unwrap()).collect()).collect();
+    let matrix: Vec<Vec<f64>> = (0..10)
+        .map(|c| rows.iter().map(|r| r[c].as_f64().unwrap()).collect())
+        .collect();
     let body = json!({"kind": "trajectories", "trajectory_matrix": matrix, "image_size": file["image_size"],
                       "k": file["num_models"], "seed": 3});
     let m = server.post_json("/v1/fit", &body);
@@ -73,10 +93,19 @@ fn fits_a_real_kt3dmoseg_sequence() {
 #[test]
 fn fits_real_adelaide_pairs_with_each_model() {
     let server = Server::start(&[]);
-    for (file, model) in [("adelaidermf/bonython.json", "adelaide-homography"), ("adelaidermf/biscuit.json", "adelaide-fundamental")] {
+    for (file, model) in [
+        ("adelaidermf/bonython.json", "adelaide-homography"),
+        ("adelaidermf/biscuit.json", "adelaide-fundamental"),
+    ] {
         let f = dataset(file);
         let n = f["points"].as_array().unwrap().len();
-        let r = server.post_json("/v1/fit", &fit_body(&f, json!({"model": model, "selection": "silhouette", "return_embeddings": true})));
+        let r = server.post_json(
+            "/v1/fit",
+            &fit_body(
+                &f,
+                json!({"model": model, "selection": "silhouette", "return_embeddings": true}),
+            ),
+        );
         assert_eq!(r.status, 200, "{file}: {}", r.text());
         let v = r.json();
         assert_eq!(v["model"]["name"], model);
@@ -84,7 +113,12 @@ fn fits_real_adelaide_pairs_with_each_model() {
         assert_eq!(v["selection"], "silhouette");
         let emb = v["embeddings"].as_array().unwrap();
         assert_eq!(emb.len(), n);
-        let norm: f64 = emb[0].as_array().unwrap().iter().map(|x| x.as_f64().unwrap().powi(2)).sum();
+        let norm: f64 = emb[0]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap().powi(2))
+            .sum();
         assert!((norm - 1.0).abs() < 1e-3, "embeddings are unit length");
     }
 }
@@ -92,16 +126,31 @@ fn fits_real_adelaide_pairs_with_each_model() {
 #[test]
 fn fits_a_generated_lce_sample_invariant_to_scale() {
     let server = Server::start(&[]);
-    let s = LceGenerator::new(11, LceConfig::default()).sample(LceVariant::Mixed, "t").sample;
-    let rows: Vec<Vec<f64>> = (0..s.points.len()).map(|i| s.points.row(i).to_vec()).collect();
-    let r = server.post_json("/v1/fit", &json!({"kind": "points2d", "points": rows, "k": 4}));
+    let s = LceGenerator::new(11, LceConfig::default())
+        .sample(LceVariant::Mixed, "t")
+        .sample;
+    let rows: Vec<Vec<f64>> = (0..s.points.len())
+        .map(|i| s.points.row(i).to_vec())
+        .collect();
+    let r = server.post_json(
+        "/v1/fit",
+        &json!({"kind": "points2d", "points": rows, "k": 4}),
+    );
     assert_eq!(r.status, 200, "{}", r.text());
     let v = r.json();
     assert_eq!(v["model"]["name"], "lce");
     check_fit(&v, rows.len());
     // Pixel-like coordinates: scaled by 250 and shifted; the labels do not change.
-    let moved: Vec<Vec<f64>> = rows.iter().map(|p| vec![p[0] * 250.0 + 640.0, p[1] * 250.0 + 360.0]).collect();
-    let w = server.post_json("/v1/fit", &json!({"kind": "points2d", "points": moved, "k": 4})).json();
+    let moved: Vec<Vec<f64>> = rows
+        .iter()
+        .map(|p| vec![p[0] * 250.0 + 640.0, p[1] * 250.0 + 360.0])
+        .collect();
+    let w = server
+        .post_json(
+            "/v1/fit",
+            &json!({"kind": "points2d", "points": moved, "k": 4}),
+        )
+        .json();
     assert_eq!(error_rate(&labels(&v), &labels(&w)), 0.0);
 }
 
@@ -110,12 +159,48 @@ fn every_error_answers_with_the_json_shape() {
     let server = Server::start(&["--body-limit", "200000", "--max-points", "3000"]);
     let two = json!([[0.0, 0.0], [1.0, 1.0]]);
     let cases: Vec<(&str, Option<&str>, Vec<u8>, u16, &str)> = vec![
-        ("truncated", Some("application/json"), br#"{"kind": "points2d", "points": [[0"#.to_vec(), 400, "malformed_json"),
-        ("not json", Some("application/json"), b"hello".to_vec(), 400, "malformed_json"),
-        ("NaN literal", Some("application/json"), br#"{"kind":"points2d","points":[[NaN,1],[0,0]]}"#.to_vec(), 400, "malformed_json"),
-        ("wrong content type", Some("text/plain"), br#"{"kind":"points2d"}"#.to_vec(), 415, "unsupported_media_type"),
-        ("no content type", None, br#"{"kind":"points2d"}"#.to_vec(), 415, "unsupported_media_type"),
-        ("too large", Some("application/json"), vec![b' '; 300_000], 413, "body_too_large"),
+        (
+            "truncated",
+            Some("application/json"),
+            br#"{"kind": "points2d", "points": [[0"#.to_vec(),
+            400,
+            "malformed_json",
+        ),
+        (
+            "not json",
+            Some("application/json"),
+            b"hello".to_vec(),
+            400,
+            "malformed_json",
+        ),
+        (
+            "NaN literal",
+            Some("application/json"),
+            br#"{"kind":"points2d","points":[[NaN,1],[0,0]]}"#.to_vec(),
+            400,
+            "malformed_json",
+        ),
+        (
+            "wrong content type",
+            Some("text/plain"),
+            br#"{"kind":"points2d"}"#.to_vec(),
+            415,
+            "unsupported_media_type",
+        ),
+        (
+            "no content type",
+            None,
+            br#"{"kind":"points2d"}"#.to_vec(),
+            415,
+            "unsupported_media_type",
+        ),
+        (
+            "too large",
+            Some("application/json"),
+            vec![b' '; 300_000],
+            413,
+            "body_too_large",
+        ),
     ];
     for (what, ct, body, status, code) in cases {
         let r = server.post_raw("/v1/fit", ct, body);
@@ -123,25 +208,101 @@ fn every_error_answers_with_the_json_shape() {
         assert_eq!(r.error_code(), code, "{what}");
     }
     let semantic = vec![
-        ("empty points", json!({"kind": "points2d", "points": []}), "invalid_points"),
-        ("one point", json!({"kind": "points2d", "points": [[1.0, 2.0]]}), "invalid_points"),
-        ("wrong D", json!({"kind": "points2d", "points": [[1.0, 2.0, 3.0], [1.0, 2.0, 3.0]]}), "invalid_points"),
-        ("ragged", json!({"kind": "points2d", "points": [[1.0, 2.0], [1.0]]}), "invalid_points"),
-        ("huge value", json!({"kind": "points2d", "points": [[1e308, 2.0], [1.0, 1.0]]}), "invalid_points"),
-        ("k > N", json!({"kind": "points2d", "points": two, "k": 3}), "invalid_k"),
-        ("k = 0", json!({"kind": "points2d", "points": two, "k": 0}), "invalid_k"),
-        ("negative k", json!({"kind": "points2d", "points": two, "k": -2}), "invalid_request"),
-        ("absurd k_max", json!({"kind": "points2d", "points": two, "k_max": 100000}), "invalid_k"),
-        ("unknown model", json!({"kind": "points2d", "points": two, "model": "nope"}), "unknown_model"),
-        ("unicode model", json!({"kind": "points2d", "points": two, "model": "lcé/../../etc"}), "unknown_model"),
-        ("unknown kind", json!({"kind": "voxels", "points": two}), "unknown_kind"),
-        ("unknown field", json!({"kind": "points2d", "points": two, "colour": 1}), "invalid_request"),
-        ("wrong type", json!({"kind": "points2d", "points": "many"}), "invalid_request"),
-        ("kind/model mismatch", json!({"kind": "points2d", "points": two, "model": "kt3dmoseg"}), "model_mismatch"),
-        ("frames mismatch", json!({"kind": "trajectories", "points": [vec![0.0; 8], vec![1.0; 8]]}), "model_mismatch"),
-        ("bad selection", json!({"kind": "points2d", "points": two, "selection": "elbow"}), "invalid_selection"),
-        ("bad image size", json!({"kind": "points2d", "points": two, "image_size": [0.0, 10.0]}), "invalid_points"),
-        ("too many points", json!({"kind": "points2d", "points": vec![[0.5, 0.5]; 3001]}), "too_many_points"),
+        (
+            "empty points",
+            json!({"kind": "points2d", "points": []}),
+            "invalid_points",
+        ),
+        (
+            "one point",
+            json!({"kind": "points2d", "points": [[1.0, 2.0]]}),
+            "invalid_points",
+        ),
+        (
+            "wrong D",
+            json!({"kind": "points2d", "points": [[1.0, 2.0, 3.0], [1.0, 2.0, 3.0]]}),
+            "invalid_points",
+        ),
+        (
+            "ragged",
+            json!({"kind": "points2d", "points": [[1.0, 2.0], [1.0]]}),
+            "invalid_points",
+        ),
+        (
+            "huge value",
+            json!({"kind": "points2d", "points": [[1e308, 2.0], [1.0, 1.0]]}),
+            "invalid_points",
+        ),
+        (
+            "k > N",
+            json!({"kind": "points2d", "points": two, "k": 3}),
+            "invalid_k",
+        ),
+        (
+            "k = 0",
+            json!({"kind": "points2d", "points": two, "k": 0}),
+            "invalid_k",
+        ),
+        (
+            "negative k",
+            json!({"kind": "points2d", "points": two, "k": -2}),
+            "invalid_request",
+        ),
+        (
+            "absurd k_max",
+            json!({"kind": "points2d", "points": two, "k_max": 100000}),
+            "invalid_k",
+        ),
+        (
+            "unknown model",
+            json!({"kind": "points2d", "points": two, "model": "nope"}),
+            "unknown_model",
+        ),
+        (
+            "unicode model",
+            json!({"kind": "points2d", "points": two, "model": "lcé/../../etc"}),
+            "unknown_model",
+        ),
+        (
+            "unknown kind",
+            json!({"kind": "voxels", "points": two}),
+            "unknown_kind",
+        ),
+        (
+            "unknown field",
+            json!({"kind": "points2d", "points": two, "colour": 1}),
+            "invalid_request",
+        ),
+        (
+            "wrong type",
+            json!({"kind": "points2d", "points": "many"}),
+            "invalid_request",
+        ),
+        (
+            "kind/model mismatch",
+            json!({"kind": "points2d", "points": two, "model": "kt3dmoseg"}),
+            "model_mismatch",
+        ),
+        (
+            "frames mismatch",
+            json!({"kind": "trajectories", "points": [vec![0.0; 8], vec![1.0; 8]]}),
+            "model_mismatch",
+        ),
+        (
+            "bad selection",
+            json!({"kind": "points2d", "points": two, "selection": "elbow"}),
+            "invalid_selection",
+        ),
+        (
+            "bad image size",
+            json!({"kind": "points2d", "points": two, "image_size": [0.0, 10.0]}),
+            "invalid_points",
+        ),
+        (
+            "too many points",
+            json!({"kind": "points2d", "points": vec![[0.5, 0.5]; 3001]}),
+            "too_many_points",
+        ),
         ("no points", json!({"kind": "points2d"}), "invalid_request"),
     ];
     for (what, body, code) in semantic {
@@ -152,8 +313,15 @@ fn every_error_answers_with_the_json_shape() {
     let r = server.get("/v1/nothing");
     assert_eq!((r.status, r.error_code().as_str()), (404, "not_found"));
     let r = server.get("/v1/fit");
-    assert_eq!((r.status, r.error_code().as_str()), (405, "method_not_allowed"));
-    for path in ["/v1/models/nope", "/v1/models/..%2F..%2Fetc%2Fpasswd", "/v1/models/%C3%A9"] {
+    assert_eq!(
+        (r.status, r.error_code().as_str()),
+        (405, "method_not_allowed")
+    );
+    for path in [
+        "/v1/models/nope",
+        "/v1/models/..%2F..%2Fetc%2Fpasswd",
+        "/v1/models/%C3%A9",
+    ] {
         let r = server.get(path);
         assert_eq!(r.status, 404, "{path}");
         assert_eq!(r.error_code(), "not_found");
@@ -166,14 +334,28 @@ fn every_error_answers_with_the_json_shape() {
 #[test]
 fn overload_answers_429_and_timeouts_503() {
     let server = Server::start(&["--workers", "1", "--queue-capacity", "0"]);
-    let s = LceGenerator::new(1, LceConfig { points_per_shape: 2500, noise: 0.05 }).sample(LceVariant::Mixed, "big").sample;
-    let rows: Vec<Vec<f64>> = (0..s.points.len()).map(|i| s.points.row(i).to_vec()).collect();
-    let body = serde_json::to_vec(&json!({"kind": "points2d", "points": rows, "selection": "silhouette"})).unwrap();
+    let s = LceGenerator::new(
+        1,
+        LceConfig {
+            points_per_shape: 2500,
+            noise: 0.05,
+        },
+    )
+    .sample(LceVariant::Mixed, "big")
+    .sample;
+    let rows: Vec<Vec<f64>> = (0..s.points.len())
+        .map(|i| s.points.row(i).to_vec())
+        .collect();
+    let body =
+        serde_json::to_vec(&json!({"kind": "points2d", "points": rows, "selection": "silhouette"}))
+            .unwrap();
     let addr = server.addr;
     let handles: Vec<_> = (0..6)
         .map(|_| {
             let body = body.clone();
-            std::thread::spawn(move || common::send(addr, "POST", "/v1/fit", Some("application/json"), body).unwrap())
+            std::thread::spawn(move || {
+                common::send(addr, "POST", "/v1/fit", Some("application/json"), body).unwrap()
+            })
         })
         .collect();
     let answers: Vec<_> = handles.into_iter().map(|h| h.join().unwrap()).collect();
@@ -198,7 +380,10 @@ fn overload_answers_429_and_timeouts_503() {
 fn batch_answers_each_entry_in_order() {
     let server = Server::start(&[]);
     let good = json!({"kind": "points2d", "points": [[0.0, 0.0], [0.1, 0.0], [5.0, 5.0], [5.1, 5.0]], "k": 2});
-    let r = server.post_json("/v1/fit/batch", &json!({"requests": [good, {"kind": "points2d", "points": []}, {"nonsense": true}, good]}));
+    let r = server.post_json(
+        "/v1/fit/batch",
+        &json!({"requests": [good, {"kind": "points2d", "points": []}, {"nonsense": true}, good]}),
+    );
     assert_eq!(r.status, 200, "{}", r.text());
     let results = r.json()["results"].as_array().unwrap().clone();
     assert_eq!(results.len(), 4);
@@ -214,11 +399,24 @@ fn batch_answers_each_entry_in_order() {
 fn models_health_metrics_and_openapi() {
     let server = Server::start(&[]);
     let live = server.get("/health/live");
-    assert_eq!((live.status, live.json()["status"].as_str()), (200, Some("live")));
+    assert_eq!(
+        (live.status, live.json()["status"].as_str()),
+        (200, Some("live"))
+    );
     assert_eq!(server.get("/health/ready").status, 200);
     let models = server.get("/v1/models").json();
-    let names: Vec<&str> = models["models"].as_array().unwrap().iter().map(|m| m["name"].as_str().unwrap()).collect();
-    for want in ["adelaide-fundamental", "adelaide-homography", "kt3dmoseg", "lce"] {
+    let names: Vec<&str> = models["models"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|m| m["name"].as_str().unwrap())
+        .collect();
+    for want in [
+        "adelaide-fundamental",
+        "adelaide-homography",
+        "kt3dmoseg",
+        "lce",
+    ] {
         assert!(names.contains(&want), "{names:?}");
     }
     let card = server.get("/v1/models/kt3dmoseg");
@@ -229,7 +427,10 @@ fn models_health_metrics_and_openapi() {
     assert_eq!(card["normalization"], "image_frame");
     assert!(!card["training"]["command"].as_str().unwrap().is_empty());
     // A fit, so the request counters move; then the metrics page.
-    server.post_json("/v1/fit", &json!({"kind": "points2d", "points": [[0.0, 0.0], [1.0, 1.0]]}));
+    server.post_json(
+        "/v1/fit",
+        &json!({"kind": "points2d", "points": [[0.0, 0.0], [1.0, 1.0]]}),
+    );
     let m = server.get("/metrics");
     assert_eq!(m.status, 200);
     let text = m.text();
@@ -247,25 +448,53 @@ fn models_health_metrics_and_openapi() {
     ] {
         assert!(text.contains(name), "{name} missing from /metrics");
     }
-    assert!(text.contains("multifit_requests_total{endpoint=\"/v1/fit\",status=\"200\"} 1"), "{text}");
+    assert!(
+        text.contains("multifit_requests_total{endpoint=\"/v1/fit\",status=\"200\"} 1"),
+        "{text}"
+    );
     let doc = server.get("/openapi.yaml");
     assert_eq!(doc.status, 200);
     assert!(doc.text().starts_with("openapi: 3"));
-    assert!(doc.headers.get("x-request-id").is_some(), "request ids are generated");
+    assert!(
+        doc.headers.get("x-request-id").is_some(),
+        "request ids are generated"
+    );
 }
 
 #[test]
 fn sigterm_drains_in_flight_requests_and_exits_zero() {
     let server = Server::start(&[]);
-    let s = LceGenerator::new(2, LceConfig { points_per_shape: 2000, noise: 0.05 }).sample(LceVariant::Mixed, "big").sample;
-    let rows: Vec<Vec<f64>> = (0..s.points.len()).map(|i| s.points.row(i).to_vec()).collect();
-    let body = serde_json::to_vec(&json!({"kind": "points2d", "points": rows, "selection": "silhouette"})).unwrap();
+    let s = LceGenerator::new(
+        2,
+        LceConfig {
+            points_per_shape: 2000,
+            noise: 0.05,
+        },
+    )
+    .sample(LceVariant::Mixed, "big")
+    .sample;
+    let rows: Vec<Vec<f64>> = (0..s.points.len())
+        .map(|i| s.points.row(i).to_vec())
+        .collect();
+    let body =
+        serde_json::to_vec(&json!({"kind": "points2d", "points": rows, "selection": "silhouette"}))
+            .unwrap();
     let addr = server.addr;
-    let in_flight = std::thread::spawn(move || common::send(addr, "POST", "/v1/fit", Some("application/json"), body));
+    let in_flight = std::thread::spawn(move || {
+        common::send(addr, "POST", "/v1/fit", Some("application/json"), body)
+    });
     std::thread::sleep(std::time::Duration::from_millis(100));
     let (code, stderr) = server.terminate();
-    let answer = in_flight.join().unwrap().expect("in-flight request answered");
-    assert_eq!(answer.status, 200, "in-flight request completes: {}", answer.text());
+    let answer = in_flight
+        .join()
+        .unwrap()
+        .expect("in-flight request answered");
+    assert_eq!(
+        answer.status,
+        200,
+        "in-flight request completes: {}",
+        answer.text()
+    );
     assert_eq!(code, Some(0), "exit 0 after draining; stderr: {stderr}");
     // New connections are refused once it is gone.
     assert!(common::send(addr, "GET", "/health/live", None, vec![]).is_err());

@@ -13,7 +13,9 @@ use axum::routing::{get, post};
 use axum::{Json, Router};
 use serde_json::json;
 use tokio::sync::Semaphore;
-use tower_http::request_id::{MakeRequestId, PropagateRequestIdLayer, RequestId, SetRequestIdLayer};
+use tower_http::request_id::{
+    MakeRequestId, PropagateRequestIdLayer, RequestId, SetRequestIdLayer,
+};
 use tower_http::trace::TraceLayer;
 
 use super::error::{ApiError, ApiJson};
@@ -55,7 +57,10 @@ impl AppState {
     /// Installs the loaded models and marks the service ready.
     pub fn set_models(&self, models: BTreeMap<String, LoadedModel>) {
         for m in models.values() {
-            self.telemetry.model_info.with_label_values(&[&m.card.name, &m.card.version, m.card.kind.as_str()]).set(1);
+            self.telemetry
+                .model_info
+                .with_label_values(&[&m.card.name, &m.card.version, m.card.kind.as_str()])
+                .set(1);
         }
         let models = models.into_iter().map(|(k, v)| (k, Arc::new(v))).collect();
         if self.models.set(models).is_ok() {
@@ -64,7 +69,9 @@ impl AppState {
     }
 
     fn models(&self) -> Result<&BTreeMap<String, Arc<LoadedModel>>, ApiError> {
-        self.models.get().ok_or_else(|| ApiError::not_ready("models are still loading"))
+        self.models
+            .get()
+            .ok_or_else(|| ApiError::not_ready("models are still loading"))
     }
 }
 
@@ -80,15 +87,22 @@ struct Ids {
 impl MakeRequestId for Ids {
     fn make_request_id<B>(&mut self, _: &axum::http::Request<B>) -> Option<RequestId> {
         let n = self.next.fetch_add(1, Ordering::Relaxed);
-        HeaderValue::from_str(&format!("{:08x}-{n:06}", self.prefix)).ok().map(RequestId::new)
+        HeaderValue::from_str(&format!("{:08x}-{n:06}", self.prefix))
+            .ok()
+            .map(RequestId::new)
     }
 }
 
 /// The full router with every layer, over `state`.
 pub fn router(state: Shared, body_limit: usize) -> Router {
     let request_id = HeaderName::from_static("x-request-id");
-    let prefix = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.subsec_nanos());
-    let ids = Ids { prefix, next: Arc::new(AtomicU64::new(1)) };
+    let prefix = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    let ids = Ids {
+        prefix,
+        next: Arc::new(AtomicU64::new(1)),
+    };
     Router::new()
         .route("/v1/fit", post(fit))
         .route("/v1/fit/batch", post(fit_batch))
@@ -122,8 +136,12 @@ async fn track(State(state): State<Shared>, req: Request, next: Next) -> Respons
     let start = Instant::now();
     let response = next.run(req).await;
     let t = &state.telemetry;
-    t.request_seconds.with_label_values(&[&endpoint]).observe(start.elapsed().as_secs_f64());
-    t.requests.with_label_values(&[&endpoint, response.status().as_str()]).inc();
+    t.request_seconds
+        .with_label_values(&[&endpoint])
+        .observe(start.elapsed().as_secs_f64());
+    t.requests
+        .with_label_values(&[&endpoint, response.status().as_str()])
+        .inc();
     response
 }
 
@@ -132,34 +150,56 @@ async fn not_found() -> ApiError {
 }
 
 async fn method_not_allowed() -> ApiError {
-    ApiError::new(StatusCode::METHOD_NOT_ALLOWED, "method_not_allowed", "method not allowed on this route")
+    ApiError::new(
+        StatusCode::METHOD_NOT_ALLOWED,
+        "method_not_allowed",
+        "method not allowed on this route",
+    )
 }
 
 /// Admits, queues and runs one validated fit off the async runtime.
 async fn run_fit(state: &AppState, job: FitJob) -> Result<FitResponse, ApiError> {
     let t = &state.telemetry;
-    let admitted = state.admitted.clone().try_acquire_owned().map_err(|_| ApiError::overloaded())?;
+    let admitted = state
+        .admitted
+        .clone()
+        .try_acquire_owned()
+        .map_err(|_| ApiError::overloaded())?;
     t.queue_depth.inc();
     let _depth = scopeguard(|| t.queue_depth.dec());
     let start = Instant::now();
     let work = async {
-        let permit = state.workers.clone().acquire_owned().await.map_err(|_| ApiError::not_ready("shutting down"))?;
+        let permit = state
+            .workers
+            .clone()
+            .acquire_owned()
+            .await
+            .map_err(|_| ApiError::not_ready("shutting down"))?;
         t.queue_seconds.observe(start.elapsed().as_secs_f64());
         // If the client goes away while queued, this future is dropped and the fit never runs.
-        let job2 = job.clone();
         let handle = tokio::task::spawn_blocking(move || {
             let _permit = permit;
             let _admitted = admitted;
-            job2.model.fit(&job2.points, job2.image_size, &job2.params)
+            let outcome = job.model.fit(&job.points, job.image_size, &job.params);
+            (job, outcome)
         });
-        handle.await.map_err(|e| ApiError::internal(format!("fit worker failed: {e}")))?.map_err(ApiError::from)
+        let (job, outcome) = handle
+            .await
+            .map_err(|e| ApiError::internal(format!("fit worker failed: {e}")))?;
+        Ok::<_, ApiError>((job, outcome?))
     };
-    let outcome = tokio::time::timeout(state.timeout, work).await.map_err(|_| ApiError::timeout())??;
+    let (job, outcome) = tokio::time::timeout(state.timeout, work)
+        .await
+        .map_err(|_| ApiError::timeout())??;
     t.embed_seconds.observe(outcome.embed_ms / 1e3);
     t.cluster_seconds.observe(outcome.cluster_ms / 1e3);
     t.points.observe(job.points.len() as f64);
     t.chosen_k.observe(outcome.clustering.k as f64);
-    Ok(FitResponse::new(&job, outcome, start.elapsed().as_secs_f64() * 1e3))
+    Ok(FitResponse::new(
+        &job,
+        outcome,
+        start.elapsed().as_secs_f64() * 1e3,
+    ))
 }
 
 /// Runs a closure when dropped.
@@ -180,11 +220,19 @@ fn counted(state: &AppState, e: ApiError) -> ApiError {
     e
 }
 
-async fn fit(State(state): State<Shared>, body: Result<ApiJson<FitRequest>, ApiError>) -> Result<Json<FitResponse>, ApiError> {
+async fn fit(
+    State(state): State<Shared>,
+    body: Result<ApiJson<FitRequest>, ApiError>,
+) -> Result<Json<FitResponse>, ApiError> {
     let ApiJson(request) = body.map_err(|e| counted(&state, e))?;
     let models = state.models().map_err(|e| counted(&state, e))?;
-    let job = request.validate(models, &state.limits).map_err(|e| counted(&state, e))?;
-    run_fit(&state, job).await.map(Json).map_err(|e| counted(&state, e))
+    let job = request
+        .validate(models, &state.limits)
+        .map_err(|e| counted(&state, e))?;
+    run_fit(&state, job)
+        .await
+        .map(Json)
+        .map_err(|e| counted(&state, e))
 }
 
 async fn fit_batch(
@@ -196,13 +244,17 @@ async fn fit_batch(
     if batch.requests.len() > state.limits.max_batch {
         return Err(counted(
             &state,
-            ApiError::invalid("too_many_requests_in_batch", format!("at most {} requests per batch", state.limits.max_batch)),
+            ApiError::invalid(
+                "too_many_requests_in_batch",
+                format!("at most {} requests per batch", state.limits.max_batch),
+            ),
         ));
     }
     let mut results = Vec::with_capacity(batch.requests.len());
     for raw in batch.requests {
         let one = async {
-            let request: FitRequest = serde_json::from_value(raw).map_err(|e| ApiError::invalid("invalid_request", e.to_string()))?;
+            let request: FitRequest = serde_json::from_value(raw)
+                .map_err(|e| ApiError::invalid("invalid_request", e.to_string()))?;
             let job = request.validate(models, &state.limits)?;
             run_fit(&state, job).await
         };
@@ -220,10 +272,17 @@ async fn list_models(State(state): State<Shared>) -> Result<Json<serde_json::Val
     Ok(Json(json!({ "models": cards })))
 }
 
-async fn get_model(State(state): State<Shared>, Path(name): Path<String>) -> Result<Json<serde_json::Value>, ApiError> {
+async fn get_model(
+    State(state): State<Shared>,
+    Path(name): Path<String>,
+) -> Result<Json<serde_json::Value>, ApiError> {
     let models = state.models()?;
-    let model = models.get(&name).ok_or_else(|| ApiError::not_found(format!("no model named {name:?}")))?;
-    serde_json::to_value(&model.card).map(Json).map_err(|e| ApiError::internal(e.to_string()))
+    let model = models
+        .get(&name)
+        .ok_or_else(|| ApiError::not_found(format!("no model named {name:?}")))?;
+    serde_json::to_value(&model.card)
+        .map(Json)
+        .map_err(|e| ApiError::internal(e.to_string()))
 }
 
 async fn live() -> Json<serde_json::Value> {
@@ -234,13 +293,21 @@ async fn ready(State(state): State<Shared>) -> Response {
     if state.ready.load(Ordering::SeqCst) {
         Json(json!({ "status": "ready" })).into_response()
     } else {
-        let why = if state.models.get().is_some() { "draining" } else { "loading models" };
+        let why = if state.models.get().is_some() {
+            "draining"
+        } else {
+            "loading models"
+        };
         ApiError::not_ready(why).into_response()
     }
 }
 
 async fn metrics(State(state): State<Shared>) -> Response {
-    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], state.telemetry.render()).into_response()
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        state.telemetry.render(),
+    )
+        .into_response()
 }
 
 async fn openapi() -> Response {

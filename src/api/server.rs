@@ -40,7 +40,10 @@ pub enum ServerError {
     #[error("invalid configuration: {0}")]
     Config(String),
     #[error("cannot listen on {addr}: {source}")]
-    Bind { addr: SocketAddr, source: std::io::Error },
+    Bind {
+        addr: SocketAddr,
+        source: std::io::Error,
+    },
     #[error("cannot load models: {0}")]
     Models(#[from] RegistryError),
     #[error("server failed: {0}")]
@@ -79,12 +82,23 @@ impl ServerConfig {
 /// Binds, loads every model (the service answers 503 on /health/ready until then), serves until
 /// SIGTERM or Ctrl-C, then stops accepting, finishes in-flight requests and returns.
 /// `on_bound` receives the bound address (useful with port 0).
-pub async fn serve(config: ServerConfig, on_bound: impl FnOnce(SocketAddr)) -> Result<(), ServerError> {
-    let listener =
-        TcpListener::bind(config.addr).await.map_err(|source| ServerError::Bind { addr: config.addr, source })?;
+pub async fn serve(
+    config: ServerConfig,
+    on_bound: impl FnOnce(SocketAddr),
+) -> Result<(), ServerError> {
+    let listener = TcpListener::bind(config.addr)
+        .await
+        .map_err(|source| ServerError::Bind {
+            addr: config.addr,
+            source,
+        })?;
     let addr = listener.local_addr()?;
-    let state =
-        Arc::new(AppState::new(config.limits, config.workers, config.queue_capacity, config.request_timeout));
+    let state = Arc::new(AppState::new(
+        config.limits,
+        config.workers,
+        config.queue_capacity,
+        config.request_timeout,
+    ));
     let app = router(state.clone(), config.body_limit);
     tracing::info!(%addr, "listening");
     on_bound(addr);

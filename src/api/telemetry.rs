@@ -2,16 +2,31 @@
 //! initialised, at start, so `/metrics` is never empty.
 
 use prometheus::{
-    Encoder, Histogram, HistogramOpts, HistogramVec, IntCounterVec, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder,
+    Encoder, Histogram, HistogramOpts, HistogramVec, IntCounterVec, IntGauge, IntGaugeVec, Opts,
+    Registry, TextEncoder,
 };
 
 /// The endpoints counted by name (anything else is counted as "other").
-pub const ENDPOINTS: [&str; 8] =
-    ["/v1/fit", "/v1/fit/batch", "/v1/models", "/v1/models/{name}", "/health/live", "/health/ready", "/metrics", "/openapi.yaml"];
+pub const ENDPOINTS: [&str; 8] = [
+    "/v1/fit",
+    "/v1/fit/batch",
+    "/v1/models",
+    "/v1/models/{name}",
+    "/health/live",
+    "/health/ready",
+    "/metrics",
+    "/openapi.yaml",
+];
 
 /// Reasons a request is rejected before computing.
-pub const REJECTIONS: [&str; 6] =
-    ["malformed", "too_large", "unsupported_media_type", "invalid", "overloaded", "timeout"];
+pub const REJECTIONS: [&str; 6] = [
+    "malformed",
+    "too_large",
+    "unsupported_media_type",
+    "invalid",
+    "overloaded",
+    "timeout",
+];
 
 pub struct Telemetry {
     registry: Registry,
@@ -28,40 +43,75 @@ pub struct Telemetry {
 }
 
 fn seconds_buckets() -> Vec<f64> {
-    vec![0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0]
+    vec![
+        0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,
+    ]
 }
 
 impl Telemetry {
     pub fn new() -> Self {
         let registry = Registry::new();
         let requests = IntCounterVec::new(
-            Opts::new("multifit_requests_total", "HTTP requests by endpoint and status code"),
+            Opts::new(
+                "multifit_requests_total",
+                "HTTP requests by endpoint and status code",
+            ),
             &["endpoint", "status"],
         )
         .expect("valid metric");
         let rejections = IntCounterVec::new(
-            Opts::new("multifit_rejections_total", "Requests rejected before computing, by reason"),
+            Opts::new(
+                "multifit_rejections_total",
+                "Requests rejected before computing, by reason",
+            ),
             &["reason"],
         )
         .expect("valid metric");
         let request_seconds = HistogramVec::new(
-            HistogramOpts::new("multifit_request_duration_seconds", "Request duration by endpoint").buckets(seconds_buckets()),
+            HistogramOpts::new(
+                "multifit_request_duration_seconds",
+                "Request duration by endpoint",
+            )
+            .buckets(seconds_buckets()),
             &["endpoint"],
         )
         .expect("valid metric");
         let hist = |name: &str, help: &str, buckets: Vec<f64>| {
-            Histogram::with_opts(HistogramOpts::new(name, help).buckets(buckets)).expect("valid metric")
+            Histogram::with_opts(HistogramOpts::new(name, help).buckets(buckets))
+                .expect("valid metric")
         };
-        let queue_seconds = hist("multifit_queue_duration_seconds", "Time a fit waited for a worker", seconds_buckets());
-        let embed_seconds = hist("multifit_embed_duration_seconds", "Network forward time per fit", seconds_buckets());
-        let cluster_seconds = hist("multifit_cluster_duration_seconds", "K-means and K selection time per fit", seconds_buckets());
+        let queue_seconds = hist(
+            "multifit_queue_duration_seconds",
+            "Time a fit waited for a worker",
+            seconds_buckets(),
+        );
+        let embed_seconds = hist(
+            "multifit_embed_duration_seconds",
+            "Network forward time per fit",
+            seconds_buckets(),
+        );
+        let cluster_seconds = hist(
+            "multifit_cluster_duration_seconds",
+            "K-means and K selection time per fit",
+            seconds_buckets(),
+        );
         let points = hist(
             "multifit_points_per_request",
             "Points per fit",
-            vec![10.0, 50.0, 100.0, 250.0, 500.0, 1000.0, 2500.0, 5000.0, 10000.0, 20000.0, 50000.0],
+            vec![
+                10.0, 50.0, 100.0, 250.0, 500.0, 1000.0, 2500.0, 5000.0, 10000.0, 20000.0, 50000.0,
+            ],
         );
-        let chosen_k = hist("multifit_chosen_k", "Number of structures returned per fit", (1..=12).map(f64::from).collect());
-        let queue_depth = IntGauge::new("multifit_queue_depth", "Fits waiting for or running on a worker").expect("valid metric");
+        let chosen_k = hist(
+            "multifit_chosen_k",
+            "Number of structures returned per fit",
+            (1..=12).map(f64::from).collect(),
+        );
+        let queue_depth = IntGauge::new(
+            "multifit_queue_depth",
+            "Fits waiting for or running on a worker",
+        )
+        .expect("valid metric");
         let model_info = IntGaugeVec::new(
             Opts::new("multifit_model_info", "Loaded models (value 1)"),
             &["name", "version", "kind"],
@@ -106,7 +156,9 @@ impl Telemetry {
     /// The Prometheus text exposition.
     pub fn render(&self) -> String {
         let mut buf = Vec::new();
-        TextEncoder::new().encode(&self.registry.gather(), &mut buf).expect("text encoding");
+        TextEncoder::new()
+            .encode(&self.registry.gather(), &mut buf)
+            .expect("text encoding");
         String::from_utf8(buf).expect("utf-8")
     }
 

@@ -64,50 +64,86 @@ pub struct FitJob {
 
 /// The shipped model used for a kind when the request names none: the first (by name) whose
 /// card has that kind.
-pub fn default_model<'a>(models: &'a BTreeMap<String, Arc<LoadedModel>>, kind: Kind) -> Option<&'a Arc<LoadedModel>> {
+pub fn default_model<'a>(
+    models: &'a BTreeMap<String, Arc<LoadedModel>>,
+    kind: Kind,
+) -> Option<&'a Arc<LoadedModel>> {
     models.values().find(|m| m.card.kind == kind)
 }
 
 impl FitRequest {
     /// Checks every field against the limits and the chosen model.
-    pub fn validate(self, models: &BTreeMap<String, Arc<LoadedModel>>, limits: &Limits) -> Result<FitJob, ApiError> {
+    pub fn validate(
+        self,
+        models: &BTreeMap<String, Arc<LoadedModel>>,
+        limits: &Limits,
+    ) -> Result<FitJob, ApiError> {
         let kind = Kind::parse(&self.kind).ok_or_else(|| {
-            ApiError::invalid("unknown_kind", format!("kind {:?} is not one of points2d, correspondences, trajectories", self.kind))
+            ApiError::invalid(
+                "unknown_kind",
+                format!(
+                    "kind {:?} is not one of points2d, correspondences, trajectories",
+                    self.kind
+                ),
+            )
         })?;
         let points = match (self.points, self.trajectory_matrix) {
             (Some(_), Some(_)) => {
-                return Err(ApiError::invalid("invalid_request", "give either points or trajectory_matrix, not both"));
+                return Err(ApiError::invalid(
+                    "invalid_request",
+                    "give either points or trajectory_matrix, not both",
+                ));
             }
-            (None, None) => return Err(ApiError::invalid("invalid_request", "points (or trajectory_matrix) is required")),
+            (None, None) => {
+                return Err(ApiError::invalid(
+                    "invalid_request",
+                    "points (or trajectory_matrix) is required",
+                ));
+            }
             (Some(rows), None) => {
                 check_size(rows.len(), rows.first().map_or(0, |r| r.len()), limits)?;
                 PointSet::from_rows(kind, &rows)?
             }
             (None, Some(matrix)) => {
                 if kind != Kind::Trajectories {
-                    return Err(ApiError::invalid("invalid_request", "trajectory_matrix is only for kind trajectories"));
+                    return Err(ApiError::invalid(
+                        "invalid_request",
+                        "trajectory_matrix is only for kind trajectories",
+                    ));
                 }
                 check_size(matrix.first().map_or(0, |r| r.len()), matrix.len(), limits)?;
                 PointSet::from_trajectory_matrix(&matrix)?
             }
         };
         let model = match &self.model {
-            Some(name) => models
-                .get(name)
-                .ok_or_else(|| ApiError::invalid("unknown_model", format!("no model named {name:?}; see GET /v1/models")))?,
-            None => default_model(models, kind)
-                .ok_or_else(|| ApiError::invalid("unknown_model", format!("no model serves kind {kind}")))?,
+            Some(name) => models.get(name).ok_or_else(|| {
+                ApiError::invalid(
+                    "unknown_model",
+                    format!("no model named {name:?}; see GET /v1/models"),
+                )
+            })?,
+            None => default_model(models, kind).ok_or_else(|| {
+                ApiError::invalid("unknown_model", format!("no model serves kind {kind}"))
+            })?,
         };
         if model.card.kind != kind {
             return Err(ApiError::invalid(
                 "model_mismatch",
-                format!("model {} takes {}, the request has kind {kind}", model.card.name, model.card.kind),
+                format!(
+                    "model {} takes {}, the request has kind {kind}",
+                    model.card.name, model.card.kind
+                ),
             ));
         }
         if points.dim() != model.card.input_dim {
             return Err(ApiError::invalid(
                 "model_mismatch",
-                format!("model {} takes rows of {} values, got {}", model.card.name, model.card.input_dim, points.dim()),
+                format!(
+                    "model {} takes rows of {} values, got {}",
+                    model.card.name,
+                    model.card.input_dim,
+                    points.dim()
+                ),
             ));
         }
         let image_size = match self.image_size {
@@ -117,12 +153,18 @@ impl FitRequest {
         let n = points.len();
         let k_max = self.k_max.unwrap_or(model.card.k_max);
         if k_max == 0 || k_max > limits.max_k_max {
-            return Err(ApiError::invalid("invalid_k", format!("k_max must be between 1 and {}", limits.max_k_max)));
+            return Err(ApiError::invalid(
+                "invalid_k",
+                format!("k_max must be between 1 and {}", limits.max_k_max),
+            ));
         }
         let selection = match (self.k, self.selection.as_deref()) {
             (Some(k), _) => {
                 if k == 0 || k > n {
-                    return Err(ApiError::invalid("invalid_k", format!("k = {k} must be between 1 and the number of points ({n})")));
+                    return Err(ApiError::invalid(
+                        "invalid_k",
+                        format!("k = {k} must be between 1 and the number of points ({n})"),
+                    ));
                 }
                 Selection::Fixed(k)
             }
@@ -130,11 +172,17 @@ impl FitRequest {
             (None, Some("sod")) => Selection::Sod,
             (None, Some("silhouette")) => Selection::Silhouette,
             (None, Some(other)) => {
-                return Err(ApiError::invalid("invalid_selection", format!("selection {other:?} is not sod or silhouette")));
+                return Err(ApiError::invalid(
+                    "invalid_selection",
+                    format!("selection {other:?} is not sod or silhouette"),
+                ));
             }
         };
-        let params =
-            ClusterParams::builder().k_max(k_max).selection(selection).seed(self.seed.unwrap_or(0)).build()?;
+        let params = ClusterParams::builder()
+            .k_max(k_max)
+            .selection(selection)
+            .seed(self.seed.unwrap_or(0))
+            .build()?;
         Ok(FitJob {
             model: model.clone(),
             points,
@@ -147,12 +195,21 @@ impl FitRequest {
 
 fn check_size(n: usize, width: usize, limits: &Limits) -> Result<(), ApiError> {
     if n > limits.max_points {
-        return Err(ApiError::invalid("too_many_points", format!("{n} points; this server takes at most {}", limits.max_points)));
+        return Err(ApiError::invalid(
+            "too_many_points",
+            format!(
+                "{n} points; this server takes at most {}",
+                limits.max_points
+            ),
+        ));
     }
     if width > 2 * limits.max_frames {
         return Err(ApiError::invalid(
             "too_many_frames",
-            format!("rows of {width} values; this server takes at most {} frames", limits.max_frames),
+            format!(
+                "rows of {width} values; this server takes at most {} frames",
+                limits.max_frames
+            ),
         ));
     }
     Ok(())
@@ -200,19 +257,43 @@ pub struct FitResponse {
 
 impl FitResponse {
     pub fn new(job: &FitJob, outcome: FitOutcome, total_ms: f64) -> Self {
-        let Clustering { labels, k, selection, residuals, scores, cluster_sizes } = outcome.clustering;
+        let Clustering {
+            labels,
+            k,
+            selection,
+            residuals,
+            scores,
+            cluster_sizes,
+        } = outcome.clustering;
         Self {
-            model: ModelRef { name: job.model.card.name.clone(), version: job.model.card.version.clone() },
+            model: ModelRef {
+                name: job.model.card.name.clone(),
+                version: job.model.card.version.clone(),
+            },
             labels,
             k,
             selection: selection.name().to_string(),
-            residuals: residuals.into_iter().map(|(k, r)| Residual { k, r }).collect(),
-            scores: scores.into_iter().map(|(k, score)| KScore { k, score }).collect(),
+            residuals: residuals
+                .into_iter()
+                .map(|(k, r)| Residual { k, r })
+                .collect(),
+            scores: scores
+                .into_iter()
+                .map(|(k, score)| KScore { k, score })
+                .collect(),
             cluster_sizes,
-            embeddings: job
-                .return_embeddings
-                .then(|| outcome.embeddings.chunks(outcome.embed_dim).map(|r| r.to_vec()).collect()),
-            timing_ms: Timing { embed: outcome.embed_ms, cluster: outcome.cluster_ms, total: total_ms },
+            embeddings: job.return_embeddings.then(|| {
+                outcome
+                    .embeddings
+                    .chunks(outcome.embed_dim)
+                    .map(|r| r.to_vec())
+                    .collect()
+            }),
+            timing_ms: Timing {
+                embed: outcome.embed_ms,
+                cluster: outcome.cluster_ms,
+                total: total_ms,
+            },
         }
     }
 }

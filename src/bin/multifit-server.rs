@@ -90,7 +90,10 @@ fn main() -> ExitCode {
         }
     };
     tracing::info!(config = %serde_json::to_string(&config).unwrap_or_default(), "effective configuration");
-    let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
+    let runtime = match tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+    {
         Ok(r) => r,
         Err(e) => {
             tracing::error!("cannot start the async runtime: {e}");

@@ -198,7 +198,8 @@ struct CvCmd {
 
 impl TrainArgs {
     fn config(&self, input_dim: usize) -> Result<TrainConfig> {
-        let loss = Loss::parse(&self.loss, self.alpha).with_context(|| format!("unknown loss {:?} (l2, ce, mimi)", self.loss))?;
+        let loss = Loss::parse(&self.loss, self.alpha)
+            .with_context(|| format!("unknown loss {:?} (l2, ce, mimi)", self.loss))?;
         let config = TrainConfig {
             model: ModelConfig {
                 input_dim,
@@ -233,7 +234,12 @@ impl DataArgs {
         }
         let kind = all[0].points.kind();
         if let Some(s) = all.iter().find(|s| s.points.kind() != kind) {
-            bail!("{}: kind {} differs from {} of the other sequences", s.name, s.points.kind(), kind);
+            bail!(
+                "{}: kind {} differs from {} of the other sequences",
+                s.name,
+                s.points.kind(),
+                kind
+            );
         }
         Ok(all)
     }
@@ -246,29 +252,43 @@ fn command_line() -> String {
 fn machine() -> String {
     let cpu = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
-        .and_then(|t| t.lines().find(|l| l.starts_with("model name")).map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string()))
+        .and_then(|t| {
+            t.lines()
+                .find(|l| l.starts_with("model name"))
+                .map(|l| l.split(':').nth(1).unwrap_or("").trim().to_string())
+        })
         .unwrap_or_else(|| "unknown CPU".into());
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     format!("{cores} cores, {cpu}")
 }
 
 fn git_commit() -> Option<String> {
-    let out = std::process::Command::new("git").args(["rev-parse", "--short", "HEAD"]).output().ok()?;
-    out.status.success().then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+    let out = std::process::Command::new("git")
+        .args(["rev-parse", "--short", "HEAD"])
+        .output()
+        .ok()?;
+    out.status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
 }
 
 fn progress(len: u64) -> ProgressBar {
     let bar = ProgressBar::new(len);
     bar.set_style(
-        ProgressStyle::with_template("{spinner} epoch {prefix} [{bar:30}] {pos}/{len} {msg} eta {eta}")
-            .expect("valid template")
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{spinner} epoch {prefix} [{bar:30}] {pos}/{len} {msg} eta {eta}",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
     );
     bar
 }
 
 fn gen_lce(a: GenLceArgs) -> Result<()> {
-    let config = LceConfig { points_per_shape: a.points_per_shape, noise: a.noise };
+    let config = LceConfig {
+        points_per_shape: a.points_per_shape,
+        noise: a.noise,
+    };
     if config.points_per_shape < 2 || !(config.noise.is_finite() && config.noise >= 0.0) {
         bail!("points per shape must be at least 2 and noise finite and non-negative");
     }
@@ -276,7 +296,8 @@ fn gen_lce(a: GenLceArgs) -> Result<()> {
         VariantArg::Mixed => LceVariant::Mixed,
         VariantArg::Unmixed => LceVariant::Unmixed,
     };
-    std::fs::create_dir_all(&a.out).with_context(|| format!("{}: cannot create", a.out.display()))?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("{}: cannot create", a.out.display()))?;
     let mut generator = LceGenerator::new(a.seed, config);
     let tag = match variant {
         LceVariant::Mixed => "mixed",
@@ -295,7 +316,9 @@ fn gen_lce(a: GenLceArgs) -> Result<()> {
 
 /// Training samples of a sequence list under a protocol.
 fn samples_of(seqs: &[Sequence], protocol: Protocol, clip_len: usize) -> Vec<Sample> {
-    seqs.iter().flat_map(|s| cv::train_samples(s, protocol, clip_len)).collect()
+    seqs.iter()
+        .flat_map(|s| cv::train_samples(s, protocol, clip_len))
+        .collect()
 }
 
 fn train_cmd(a: TrainCmd) -> Result<()> {
@@ -305,20 +328,38 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
     let val_samples = match &a.val {
         Some(p) => {
             let vs = load_sequences(p, a.data.model_type.as_deref())?;
-            vs.iter().filter_map(|s| cv::test_sample(s, a.data.clip_len)).collect()
+            vs.iter()
+                .filter_map(|s| cv::test_sample(s, a.data.clip_len))
+                .collect()
         }
         None => vec![],
     };
-    let input_dim = train_samples.first().context("no training samples")?.points.dim();
+    let input_dim = train_samples
+        .first()
+        .context("no training samples")?
+        .points
+        .dim();
     let config = a.train.config(input_dim)?;
     let norm = Normalization::for_kind(kind);
     let k = config.model.neighbors;
-    let (train_set, val_set) = (prepare(&train_samples, norm, k), prepare(&val_samples, norm, k));
-    let out = a.out.clone().unwrap_or_else(|| Path::new("models").join(&a.name));
-    let run_dir = a.run_dir.clone().unwrap_or_else(|| Path::new("runs").join(&a.name));
+    let (train_set, val_set) = (
+        prepare(&train_samples, norm, k),
+        prepare(&val_samples, norm, k),
+    );
+    let out = a
+        .out
+        .clone()
+        .unwrap_or_else(|| Path::new("models").join(&a.name));
+    let run_dir = a
+        .run_dir
+        .clone()
+        .unwrap_or_else(|| Path::new("runs").join(&a.name));
     std::fs::create_dir_all(&run_dir)?;
     let log_path = run_dir.join("train.jsonl");
-    let mut log = std::fs::OpenOptions::new().create(true).append(true).open(&log_path)?;
+    let mut log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&log_path)?;
     eprintln!(
         "training {} on {} samples ({} validation), {} epochs, {:?}",
         a.name,
@@ -335,7 +376,8 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
             "epoch {:>4} loss {:.5} val_err {} lr {:.2e} {:.1}s{}",
             e.epoch,
             e.train_loss,
-            e.val_error.map_or("-".into(), |v| format!("{:.2}%", 100.0 * v)),
+            e.val_error
+                .map_or("-".into(), |v| format!("{:.2}%", 100.0 * v)),
             e.learning_rate,
             e.seconds,
             if e.best { " *" } else { "" }
@@ -359,7 +401,12 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
     let data = if a.describe.is_empty() {
         format!(
             "{} ({} sequences, {} training samples, protocol {:?}, clip {} frames)",
-            a.data.data.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "),
+            a.data
+                .data
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
             seqs.len(),
             train_set.len(),
             a.train.protocol,
@@ -383,18 +430,27 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
         card.metrics.push(MetricRecord {
             name: "validation_error_known_k".into(),
             value: v,
-            protocol: format!("mean error rate with known K on {} validation samples, best epoch {}", val_set.len(), outcome.best_epoch),
+            protocol: format!(
+                "mean error rate with known K on {} validation samples, best epoch {}",
+                val_set.len(),
+                outcome.best_epoch
+            ),
             command: card.training.command.clone(),
         });
     }
-    card.write(&out).with_context(|| format!("{}: cannot write the card", out.display()))?;
+    card.write(&out)
+        .with_context(|| format!("{}: cannot write the card", out.display()))?;
     outcome.net.save(&out.join(WEIGHTS_FILE))?;
     println!(
         "wrote {} (best epoch {}, {:.0} s{})",
         out.display(),
         outcome.best_epoch,
         outcome.seconds,
-        if outcome.interrupted { ", interrupted" } else { "" }
+        if outcome.interrupted {
+            ", interrupted"
+        } else {
+            ""
+        }
     );
     Ok(())
 }
@@ -412,23 +468,52 @@ fn eval_cmd(a: EvalCmd) -> Result<()> {
     let model = LoadedModel::load(&a.model)?;
     let seqs = a.data.sequences()?;
     let samples = eval_samples(&seqs, model.card.input_dim);
-    let settings = EvalSettings { k_max: a.k_max, restarts: a.restarts, seed: a.seed };
+    let settings = EvalSettings {
+        k_max: a.k_max,
+        restarts: a.restarts,
+        seed: a.seed,
+    };
     let mut rows = Vec::new();
     for s in &samples {
-        rows.push(evaluate_sample(&model, s, &settings).with_context(|| format!("sample {}", s.name))?);
+        rows.push(
+            evaluate_sample(&model, s, &settings).with_context(|| format!("sample {}", s.name))?,
+        );
     }
     let t = totals(&rows);
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "rows": rows, "totals": t }))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({ "rows": rows, "totals": t }))?
+        );
     } else {
         print!("{}", format_table(&rows));
     }
     if let Some(name) = a.record {
         let mut card = model.card.clone();
-        card.metrics.retain(|m| m.name != name && m.name != format!("{name}_nmi") && m.name != format!("{name}_sod"));
-        let protocol = format!("{} samples from {}", rows.len(), a.data.data.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "));
-        for (suffix, value) in [("", t.known.mean_error), ("_nmi", t.known.mean_nmi), ("_sod", t.sod.mean_error)] {
-            card.metrics.push(MetricRecord { name: format!("{name}{suffix}"), value, protocol: protocol.clone(), command: command_line() });
+        card.metrics.retain(|m| {
+            m.name != name && m.name != format!("{name}_nmi") && m.name != format!("{name}_sod")
+        });
+        let protocol = format!(
+            "{} samples from {}",
+            rows.len(),
+            a.data
+                .data
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+        for (suffix, value) in [
+            ("", t.known.mean_error),
+            ("_nmi", t.known.mean_nmi),
+            ("_sod", t.sod.mean_error),
+        ] {
+            card.metrics.push(MetricRecord {
+                name: format!("{name}{suffix}"),
+                value,
+                protocol: protocol.clone(),
+                command: command_line(),
+            });
         }
         card.write(&a.model)?;
     }
@@ -437,28 +522,48 @@ fn eval_cmd(a: EvalCmd) -> Result<()> {
 
 fn cv_cmd(a: CvCmd) -> Result<()> {
     let seqs = a.data.sequences()?;
-    let input_dim = cv::test_sample(&seqs[0], a.data.clip_len).context("no test sample")?.points.dim();
+    let input_dim = cv::test_sample(&seqs[0], a.data.clip_len)
+        .context("no test sample")?
+        .points
+        .dim();
     let spec = CvSpec {
         train: a.train.config(input_dim)?,
         protocol: a.train.protocol,
         clip_len: a.data.clip_len,
-        eval: EvalSettings { k_max: a.train.k_max, restarts: a.restarts, seed: 0 },
+        eval: EvalSettings {
+            k_max: a.train.k_max,
+            restarts: a.restarts,
+            seed: 0,
+        },
         out: a.out.clone(),
     };
     std::fs::create_dir_all(&a.out)?;
-    std::fs::write(a.out.join("spec.json"), serde_json::to_string_pretty(&serde_json::json!({
-        "command": command_line(), "train": spec.train, "protocol": spec.protocol, "clip_len": spec.clip_len,
-    }))?)?;
+    std::fs::write(
+        a.out.join("spec.json"),
+        serde_json::to_string_pretty(&serde_json::json!({
+            "command": command_line(), "train": spec.train, "protocol": spec.protocol, "clip_len": spec.clip_len,
+        }))?,
+    )?;
     let names: Vec<String> = seqs.iter().map(|s| s.name.clone()).collect();
     if let Some(fold) = &a.fold {
-        let i = names.iter().position(|n| n == fold).with_context(|| format!("no sequence named {fold}"))?;
+        let i = names
+            .iter()
+            .position(|n| n == fold)
+            .with_context(|| format!("no sequence named {fold}"))?;
         let r = cv::run_fold(&spec, &seqs, i)?;
-        eprintln!("fold {fold}: error {:.2}% (known K), {:.0} s", 100.0 * r.row.known.error, r.train_seconds);
+        eprintln!(
+            "fold {fold}: error {:.2}% (known K), {:.0} s",
+            100.0 * r.row.known.error,
+            r.train_seconds
+        );
         return Ok(());
     }
     if a.jobs > 1 {
         let exe = std::env::current_exe()?;
-        let args: Vec<String> = std::env::args().skip(1).filter(|x| !x.starts_with("--jobs=")).collect();
+        let args: Vec<String> = std::env::args()
+            .skip(1)
+            .filter(|x| !x.starts_with("--jobs="))
+            .collect();
         let args = strip_flag_value(args, "--jobs");
         let failed = cv::run_in_processes(&exe, &args, &a.out, &names, a.jobs)?;
         if !failed.is_empty() {
@@ -467,21 +572,37 @@ fn cv_cmd(a: CvCmd) -> Result<()> {
     } else {
         for (i, name) in names.iter().enumerate() {
             if STOP.load(Ordering::Relaxed) {
-                bail!("interrupted; finished folds are kept in {}", a.out.display());
+                bail!(
+                    "interrupted; finished folds are kept in {}",
+                    a.out.display()
+                );
             }
             let r = cv::run_fold(&spec, &seqs, i)?;
-            eprintln!("fold {name}: error {:.2}% (known K), {:.0} s", 100.0 * r.row.known.error, r.train_seconds);
+            eprintln!(
+                "fold {name}: error {:.2}% (known K), {:.0} s",
+                100.0 * r.row.known.error,
+                r.train_seconds
+            );
         }
     }
-    let folds: Vec<cv::FoldResult> = names.iter().filter_map(|n| cv::finished_fold(&a.out, n)).collect();
+    let folds: Vec<cv::FoldResult> = names
+        .iter()
+        .filter_map(|n| cv::finished_fold(&a.out, n))
+        .collect();
     let rows: Vec<_> = folds.iter().map(|f| f.row.clone()).collect();
     let t = totals(&rows);
     let train_seconds: f64 = folds.iter().map(|f| f.train_seconds).sum();
-    std::fs::write(a.out.join("summary.json"), serde_json::to_string_pretty(&serde_json::json!({
-        "totals": t, "rows": rows, "train_seconds_total": train_seconds,
-    }))?)?;
+    std::fs::write(
+        a.out.join("summary.json"),
+        serde_json::to_string_pretty(&serde_json::json!({
+            "totals": t, "rows": rows, "train_seconds_total": train_seconds,
+        }))?,
+    )?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "totals": t, "rows": rows }))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::json!({ "totals": t, "rows": rows }))?
+        );
     } else {
         print!("{}", format_table(&rows));
         println!("training time, all folds: {train_seconds:.0} s");

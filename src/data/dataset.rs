@@ -11,9 +11,15 @@ use super::points::{ImageSize, InputError, Kind, PointSet};
 #[derive(Debug, thiserror::Error)]
 pub enum DataError {
     #[error("{path}: cannot read: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: not valid dataset JSON: {source}")]
-    Json { path: PathBuf, source: serde_json::Error },
+    Json {
+        path: PathBuf,
+        source: serde_json::Error,
+    },
     #[error("{path}: {reason}")]
     Invalid { path: PathBuf, reason: String },
     #[error("{path}: no dataset files (*.json) found")]
@@ -70,7 +76,10 @@ pub struct Sample {
 impl Sequence {
     /// Validates a parsed file; `path` only names the file in errors.
     pub fn from_file(file: SequenceFile, path: &Path) -> Result<Self, DataError> {
-        let invalid = |reason: String| DataError::Invalid { path: path.to_path_buf(), reason };
+        let invalid = |reason: String| DataError::Invalid {
+            path: path.to_path_buf(),
+            reason,
+        };
         let points = PointSet::from_rows(file.kind, &file.points)
             .map_err(|e: InputError| invalid(format!("points: {e}")))?;
         if file.labels.len() != points.len() {
@@ -92,7 +101,10 @@ impl Sequence {
         if let Some(vis) = &file.visible {
             let frames = points.dim() / 2;
             if vis.len() != points.len() || vis.iter().any(|r| r.len() != frames) {
-                return Err(invalid(format!("visible must be {} x {frames}", points.len())));
+                return Err(invalid(format!(
+                    "visible must be {} x {frames}",
+                    points.len()
+                )));
             }
         }
         Ok(Self {
@@ -107,10 +119,14 @@ impl Sequence {
 
     /// Reads and validates one sequence file.
     pub fn load(path: &Path) -> Result<Self, DataError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| DataError::Io { path: path.to_path_buf(), source })?;
-        let file: SequenceFile = serde_json::from_str(&text)
-            .map_err(|source| DataError::Json { path: path.to_path_buf(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| DataError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let file: SequenceFile = serde_json::from_str(&text).map_err(|source| DataError::Json {
+            path: path.to_path_buf(),
+            source,
+        })?;
         Self::from_file(file, path)
     }
 
@@ -146,7 +162,11 @@ impl Sequence {
             .collect();
         let values: Vec<f64> = rows
             .iter()
-            .flat_map(|&i| self.points.row(i)[2 * start..2 * (start + len)].iter().copied())
+            .flat_map(|&i| {
+                self.points.row(i)[2 * start..2 * (start + len)]
+                    .iter()
+                    .copied()
+            })
             .collect();
         let points = PointSet::from_flat(Kind::Trajectories, 2 * len, values).ok()?;
         let raw: Vec<i64> = rows.iter().map(|&i| self.labels[i]).collect();
@@ -163,7 +183,9 @@ impl Sequence {
     /// Non-overlapping clips of `len` frames starting at frame 0, then `len`, `2 len`, ...
     /// (the paper's 'Augment' setting; the first is the test clip).
     pub fn clips(&self, len: usize) -> Vec<Sample> {
-        (0..self.frames() / len.max(1)).filter_map(|c| self.clip(c * len, len)).collect()
+        (0..self.frames() / len.max(1))
+            .filter_map(|c| self.clip(c * len, len))
+            .collect()
     }
 }
 
@@ -172,7 +194,10 @@ pub fn renumber(raw: &[i64]) -> (Vec<usize>, usize) {
     let mut distinct: Vec<i64> = raw.to_vec();
     distinct.sort_unstable();
     distinct.dedup();
-    let labels = raw.iter().map(|l| distinct.binary_search(l).unwrap_or(0)).collect();
+    let labels = raw
+        .iter()
+        .map(|l| distinct.binary_search(l).unwrap_or(0))
+        .collect();
     (labels, distinct.len())
 }
 
@@ -181,7 +206,10 @@ pub fn renumber(raw: &[i64]) -> (Vec<usize>, usize) {
 pub fn load_sequences(path: &Path, model_type: Option<&str>) -> Result<Vec<Sequence>, DataError> {
     let files = if path.is_dir() {
         let mut files: Vec<PathBuf> = std::fs::read_dir(path)
-            .map_err(|source| DataError::Io { path: path.to_path_buf(), source })?
+            .map_err(|source| DataError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.extension().is_some_and(|e| e == "json") && p.is_file())
             .filter(|p| p.file_name().is_some_and(|n| n != "INDEX.json"))
@@ -199,7 +227,9 @@ pub fn load_sequences(path: &Path, model_type: Option<&str>) -> Result<Vec<Seque
         }
     }
     if out.is_empty() {
-        return Err(DataError::NoFiles { path: path.to_path_buf() });
+        return Err(DataError::NoFiles {
+            path: path.to_path_buf(),
+        });
     }
     Ok(out)
 }
@@ -251,11 +281,18 @@ mod tests {
     fn bad_files_name_the_reason() {
         let mut f = traj_file();
         f.labels.pop();
-        let err = Sequence::from_file(f, Path::new("x.json")).unwrap_err().to_string();
-        assert!(err.contains("x.json") && err.contains("2 labels for 3 points"), "{err}");
+        let err = Sequence::from_file(f, Path::new("x.json"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("x.json") && err.contains("2 labels for 3 points"),
+            "{err}"
+        );
         let mut f = traj_file();
         f.points[1].pop();
-        let err = Sequence::from_file(f, Path::new("x.json")).unwrap_err().to_string();
+        let err = Sequence::from_file(f, Path::new("x.json"))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("row 1"), "{err}");
     }
 }

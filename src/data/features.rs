@@ -50,7 +50,10 @@ mod tests {
         assert_eq!(f, vec![0.0, 1.0, 3.0, 1.0, -1.0, 2.0, 3.0, -2.0, -3.0]);
         // More neighbours than points: zero padding.
         let g = with_neighbors(&[0.0, 0.0, 1.0, 0.0], 2, 2);
-        assert_eq!(g, vec![0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0, 0.0]);
+        assert_eq!(
+            g,
+            vec![0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, -1.0, 0.0, 0.0, 0.0]
+        );
         assert_eq!(with_neighbors(&[1.0, 2.0], 1, 0), vec![1.0, 2.0]);
     }
 

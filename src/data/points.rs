@@ -73,12 +73,22 @@ pub enum InputError {
     #[error("{n} points given; at least {min} are needed")]
     TooFewPoints { n: usize, min: usize },
     #[error("row {row} has {found} values but row 0 has {expected}")]
-    Ragged { row: usize, expected: usize, found: usize },
+    Ragged {
+        row: usize,
+        expected: usize,
+        found: usize,
+    },
     #[error("rows of kind {kind} must have {expected} values, got {found}")]
-    WrongDim { kind: Kind, expected: &'static str, found: usize },
+    WrongDim {
+        kind: Kind,
+        expected: &'static str,
+        found: usize,
+    },
     #[error("value at row {row}, column {col} is not a finite number within +-1e9")]
     NonFinite { row: usize, col: usize },
-    #[error("a trajectory matrix needs an even number (>= 4) of rows (x and y per frame), got {rows}")]
+    #[error(
+        "a trajectory matrix needs an even number (>= 4) of rows (x and y per frame), got {rows}"
+    )]
     BadTrajectoryMatrix { rows: usize },
     #[error("image_size must be two finite positive numbers, got [{w}, {h}]")]
     BadImageSize { w: f64, h: f64 },
@@ -96,7 +106,10 @@ impl ImageSize {
         if width.is_finite() && height.is_finite() && width > 0.0 && height > 0.0 {
             Ok(Self { width, height })
         } else {
-            Err(InputError::BadImageSize { w: width, h: height })
+            Err(InputError::BadImageSize {
+                w: width,
+                h: height,
+            })
         }
     }
 }
@@ -116,12 +129,20 @@ impl PointSet {
         let first = rows.first().ok_or(InputError::Empty)?;
         let dim = first.len();
         if !kind.accepts_dim(dim) {
-            return Err(InputError::WrongDim { kind, expected: kind.expected_dim(), found: dim });
+            return Err(InputError::WrongDim {
+                kind,
+                expected: kind.expected_dim(),
+                found: dim,
+            });
         }
         let mut values = Vec::with_capacity(rows.len() * dim);
         for (row, r) in rows.iter().enumerate() {
             if r.len() != dim {
-                return Err(InputError::Ragged { row, expected: dim, found: r.len() });
+                return Err(InputError::Ragged {
+                    row,
+                    expected: dim,
+                    found: r.len(),
+                });
             }
             values.extend_from_slice(r);
         }
@@ -142,23 +163,39 @@ impl PointSet {
         }
         for (row, r) in matrix.iter().enumerate() {
             if r.len() != n {
-                return Err(InputError::Ragged { row, expected: n, found: r.len() });
+                return Err(InputError::Ragged {
+                    row,
+                    expected: n,
+                    found: r.len(),
+                });
             }
         }
-        let values = (0..n).flat_map(|i| matrix.iter().map(move |r| r[i])).collect();
+        let values = (0..n)
+            .flat_map(|i| matrix.iter().map(move |r| r[i]))
+            .collect();
         Self::from_flat(Kind::Trajectories, rows, values)
     }
 
     /// Builds a point set from row-major values `[n, dim]`.
     pub fn from_flat(kind: Kind, dim: usize, values: Vec<f64>) -> Result<Self, InputError> {
         if !kind.accepts_dim(dim) {
-            return Err(InputError::WrongDim { kind, expected: kind.expected_dim(), found: dim });
+            return Err(InputError::WrongDim {
+                kind,
+                expected: kind.expected_dim(),
+                found: dim,
+            });
         }
         if values.is_empty() {
             return Err(InputError::Empty);
         }
-        if let Some(at) = values.iter().position(|v| !(v.is_finite() && v.abs() <= MAX_ABS_COORD)) {
-            return Err(InputError::NonFinite { row: at / dim, col: at % dim });
+        if let Some(at) = values
+            .iter()
+            .position(|v| !(v.is_finite() && v.abs() <= MAX_ABS_COORD))
+        {
+            return Err(InputError::NonFinite {
+                row: at / dim,
+                col: at % dim,
+            });
         }
         let n = values.len() / dim;
         if n < MIN_POINTS {
@@ -189,7 +226,10 @@ impl PointSet {
 
     /// Keeps the rows at `indices`, in that order.
     pub fn select(&self, indices: &[usize]) -> Result<Self, InputError> {
-        let values = indices.iter().flat_map(|&i| self.row(i).iter().copied()).collect();
+        let values = indices
+            .iter()
+            .flat_map(|&i| self.row(i).iter().copied())
+            .collect();
         Self::from_flat(self.kind, self.dim, values)
     }
 }
@@ -237,9 +277,14 @@ impl Normalization {
 /// Mean of all (x, y) pairs and their RMS distance to it.
 fn centroid_rms(values: &[f64]) -> (f64, f64, f64) {
     let pairs = (values.len() / 2) as f64;
-    let (sx, sy) = values.chunks_exact(2).fold((0.0, 0.0), |(a, b), p| (a + p[0], b + p[1]));
+    let (sx, sy) = values
+        .chunks_exact(2)
+        .fold((0.0, 0.0), |(a, b), p| (a + p[0], b + p[1]));
     let (cx, cy) = (sx / pairs, sy / pairs);
-    let ss: f64 = values.chunks_exact(2).map(|p| (p[0] - cx).powi(2) + (p[1] - cy).powi(2)).sum();
+    let ss: f64 = values
+        .chunks_exact(2)
+        .map(|p| (p[0] - cx).powi(2) + (p[1] - cy).powi(2))
+        .sum();
     (cx, cy, (ss / pairs).sqrt())
 }
 
@@ -267,14 +312,21 @@ mod tests {
 
     #[test]
     fn rejects_bad_sets() {
-        assert_eq!(PointSet::from_rows(Kind::Points2d, &[]), Err(InputError::Empty));
+        assert_eq!(
+            PointSet::from_rows(Kind::Points2d, &[]),
+            Err(InputError::Empty)
+        );
         assert!(matches!(
             PointSet::from_rows(Kind::Points2d, &[vec![1.0, 2.0]]),
             Err(InputError::TooFewPoints { n: 1, min: 2 })
         ));
         assert!(matches!(
             PointSet::from_rows(Kind::Points2d, &[vec![1.0, 2.0], vec![1.0]]),
-            Err(InputError::Ragged { row: 1, expected: 2, found: 1 })
+            Err(InputError::Ragged {
+                row: 1,
+                expected: 2,
+                found: 1
+            })
         ));
         assert!(matches!(
             PointSet::from_rows(Kind::Correspondences, &rows(&[[1.0, 2.0], [3.0, 4.0]])),
@@ -299,7 +351,12 @@ mod tests {
     #[test]
     fn trajectory_matrix_is_transposed_into_rows() {
         // Two points over two frames: x1 row, y1 row, x2 row, y2 row.
-        let m = vec![vec![1.0, 10.0], vec![2.0, 20.0], vec![3.0, 30.0], vec![4.0, 40.0]];
+        let m = vec![
+            vec![1.0, 10.0],
+            vec![2.0, 20.0],
+            vec![3.0, 30.0],
+            vec![4.0, 40.0],
+        ];
         let set = PointSet::from_trajectory_matrix(&m).unwrap();
         assert_eq!(set.dim(), 4);
         assert_eq!(set.row(0), &[1.0, 2.0, 3.0, 4.0]);
@@ -329,8 +386,10 @@ mod tests {
     #[test]
     fn unit_rms_is_invariant_to_shift_and_scale() {
         let base = rows(&[[0.3, 1.0], [2.0, -0.5], [4.0, 7.0], [-1.0, 2.5]]);
-        let moved: Vec<Vec<f64>> =
-            base.iter().map(|r| vec![r[0] * 37.5 + 400.0, r[1] * 37.5 - 120.0]).collect();
+        let moved: Vec<Vec<f64>> = base
+            .iter()
+            .map(|r| vec![r[0] * 37.5 + 400.0, r[1] * 37.5 - 120.0])
+            .collect();
         let a = Normalization::CentroidUnitRms
             .apply(&PointSet::from_rows(Kind::Points2d, &base).unwrap(), None);
         let b = Normalization::CentroidUnitRms

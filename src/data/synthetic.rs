@@ -53,7 +53,10 @@ pub struct LceConfig {
 
 impl Default for LceConfig {
     fn default() -> Self {
-        Self { points_per_shape: 50, noise: 0.05 }
+        Self {
+            points_per_shape: 50,
+            noise: 0.05,
+        }
     }
 }
 
@@ -74,7 +77,11 @@ pub struct LceSample {
 impl LceGenerator {
     pub fn new(seed: u64, config: LceConfig) -> Self {
         let noise = Normal::new(0.0, config.noise.max(0.0)).expect("finite sigma");
-        Self { rng: ChaCha8Rng::seed_from_u64(seed), config, noise }
+        Self {
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            config,
+            noise,
+        }
     }
 
     /// One sample of the given variant; `name` is stored with it.
@@ -119,7 +126,10 @@ impl LceGenerator {
     }
 
     fn centre(&mut self) -> (f64, f64) {
-        (self.rng.random_range(-0.5..=0.5), self.rng.random_range(-0.5..=0.5))
+        (
+            self.rng.random_range(-0.5..=0.5),
+            self.rng.random_range(-0.5..=0.5),
+        )
     }
 
     fn shape_points(&mut self, shape: Shape, m: usize) -> Vec<[f64; 2]> {
@@ -161,7 +171,12 @@ impl LceGenerator {
         };
         clean
             .into_iter()
-            .map(|[x, y]| [x + self.noise.sample(&mut self.rng), y + self.noise.sample(&mut self.rng)])
+            .map(|[x, y]| {
+                [
+                    x + self.noise.sample(&mut self.rng),
+                    y + self.noise.sample(&mut self.rng),
+                ]
+            })
             .collect()
     }
 }
@@ -173,7 +188,9 @@ impl LceSample {
         SequenceFile {
             name: s.name.clone(),
             kind: Kind::Points2d,
-            points: (0..s.points.len()).map(|i| s.points.row(i).to_vec()).collect(),
+            points: (0..s.points.len())
+                .map(|i| s.points.row(i).to_vec())
+                .collect(),
             labels: s.labels.iter().map(|&l| l as i64 + 1).collect(),
             num_models: Some(s.k),
             image_size: None,
@@ -224,17 +241,26 @@ mod tests {
 
     #[test]
     fn noiseless_circle_points_lie_on_a_circle() {
-        let cfg = LceConfig { points_per_shape: 40, noise: 0.0 };
-        let s = LceGenerator::new(3, cfg).with_shapes(&[Shape::Circle], "c").sample;
+        let cfg = LceConfig {
+            points_per_shape: 40,
+            noise: 0.0,
+        };
+        let s = LceGenerator::new(3, cfg)
+            .with_shapes(&[Shape::Circle], "c")
+            .sample;
         let n = s.points.len() as f64;
-        let (cx, cy) = (0..s.points.len())
-            .fold((0.0, 0.0), |(a, b), i| (a + s.points.row(i)[0] / n, b + s.points.row(i)[1] / n));
+        let (cx, cy) = (0..s.points.len()).fold((0.0, 0.0), |(a, b), i| {
+            (a + s.points.row(i)[0] / n, b + s.points.row(i)[1] / n)
+        });
         let radii: Vec<f64> = (0..s.points.len())
             .map(|i| ((s.points.row(i)[0] - cx).powi(2) + (s.points.row(i)[1] - cy).powi(2)).sqrt())
             .collect();
         // The centroid of uniform angles is near the centre; radii agree within a few percent.
         let mean = radii.iter().sum::<f64>() / n;
         assert!((0.2..=0.65).contains(&mean));
-        assert!(radii.iter().all(|r| (r - mean).abs() < 0.25 * mean), "{radii:?}");
+        assert!(
+            radii.iter().all(|r| (r - mean).abs() < 0.25 * mean),
+            "{radii:?}"
+        );
     }
 }

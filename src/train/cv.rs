@@ -74,7 +74,13 @@ pub fn finished_fold(out: &Path, name: &str) -> Option<FoldResult> {
 }
 
 /// A model card for a network trained in this process (used for folds and `train`).
-pub fn card_for(name: &str, kind: Kind, config: &TrainConfig, k_max: usize, training: TrainingInfo) -> ModelCard {
+pub fn card_for(
+    name: &str,
+    kind: Kind,
+    config: &TrainConfig,
+    k_max: usize,
+    training: TrainingInfo,
+) -> ModelCard {
     ModelCard {
         name: name.to_string(),
         version: "1".into(),
@@ -94,13 +100,19 @@ pub fn card_for(name: &str, kind: Kind, config: &TrainConfig, k_max: usize, trai
 
 /// Trains on every sequence but `held_out` and evaluates on `held_out`'s test sample.
 /// Writes the result to `<out>/folds/<name>.json`; returns the saved result when it exists.
-pub fn run_fold(spec: &CvSpec, seqs: &[Sequence], held_out: usize) -> Result<FoldResult, TrainError> {
+pub fn run_fold(
+    spec: &CvSpec,
+    seqs: &[Sequence],
+    held_out: usize,
+) -> Result<FoldResult, TrainError> {
     let name = &seqs[held_out].name;
     if let Some(done) = finished_fold(&spec.out, name) {
         return Ok(done);
     }
-    let test = test_sample(&seqs[held_out], spec.clip_len)
-        .ok_or_else(|| TrainError::Sample { name: name.clone(), reason: "no test clip".into() })?;
+    let test = test_sample(&seqs[held_out], spec.clip_len).ok_or_else(|| TrainError::Sample {
+        name: name.clone(),
+        reason: "no test clip".into(),
+    })?;
     let kind = test.points.kind();
     let train_set: Vec<Sample> = seqs
         .iter()
@@ -108,7 +120,11 @@ pub fn run_fold(spec: &CvSpec, seqs: &[Sequence], held_out: usize) -> Result<Fol
         .filter(|(i, _)| *i != held_out)
         .flat_map(|(_, s)| train_samples(s, spec.protocol, spec.clip_len))
         .collect();
-    let prepared = prepare(&train_set, Normalization::for_kind(kind), spec.train.model.neighbors);
+    let prepared = prepare(
+        &train_set,
+        Normalization::for_kind(kind),
+        spec.train.model.neighbors,
+    );
     let outcome = train(&spec.train, &prepared, &[], Hooks::default())?;
     let info = TrainingInfo {
         data: format!("fold without {name}"),
@@ -119,33 +135,67 @@ pub fn run_fold(spec: &CvSpec, seqs: &[Sequence], held_out: usize) -> Result<Fol
         seconds: outcome.seconds,
         machine: String::new(),
     };
-    let card = card_for(&format!("fold-{name}"), kind, &spec.train, spec.eval.k_max, info);
+    let card = card_for(
+        &format!("fold-{name}"),
+        kind,
+        &spec.train,
+        spec.eval.k_max,
+        info,
+    );
     let model = LoadedModel::from_parts(card, outcome.net, crate::model::cpu_device());
-    let row = evaluate_sample(&model, &test, &spec.eval)
-        .map_err(|e| TrainError::Sample { name: name.clone(), reason: e.to_string() })?;
-    let result = FoldResult { row, train_samples: prepared.len(), train_seconds: outcome.seconds, best_epoch: outcome.best_epoch };
+    let row = evaluate_sample(&model, &test, &spec.eval).map_err(|e| TrainError::Sample {
+        name: name.clone(),
+        reason: e.to_string(),
+    })?;
+    let result = FoldResult {
+        row,
+        train_samples: prepared.len(),
+        train_seconds: outcome.seconds,
+        best_epoch: outcome.best_epoch,
+    };
     let path = fold_path(&spec.out, name);
     let write = || -> std::io::Result<()> {
         std::fs::create_dir_all(path.parent().expect("folds dir"))?;
         let tmp = path.with_extension("json.tmp");
-        std::fs::write(&tmp, serde_json::to_string_pretty(&result).map_err(std::io::Error::other)?)?;
+        std::fs::write(
+            &tmp,
+            serde_json::to_string_pretty(&result).map_err(std::io::Error::other)?,
+        )?;
         std::fs::rename(&tmp, &path)
     };
-    write().map_err(|e| TrainError::Checkpoint { path: path.clone(), reason: e.to_string() })?;
+    write().map_err(|e| TrainError::Checkpoint {
+        path: path.clone(),
+        reason: e.to_string(),
+    })?;
     Ok(result)
 }
 
 /// Runs `exe <args> --fold <name>` for every unfinished fold, at most `jobs` at a time, each child
 /// limited to one compute thread (two one-thread processes train faster here than one
 /// two-thread process). Returns the names of folds whose process failed.
-pub fn run_in_processes(exe: &Path, args: &[String], out: &Path, names: &[String], jobs: usize) -> std::io::Result<Vec<String>> {
-    let mut pending: Vec<&String> = names.iter().filter(|n| finished_fold(out, n).is_none()).rev().collect();
+pub fn run_in_processes(
+    exe: &Path,
+    args: &[String],
+    out: &Path,
+    names: &[String],
+    jobs: usize,
+) -> std::io::Result<Vec<String>> {
+    let mut pending: Vec<&String> = names
+        .iter()
+        .filter(|n| finished_fold(out, n).is_none())
+        .rev()
+        .collect();
     let mut running: Vec<(String, Child)> = Vec::new();
     let mut failed = Vec::new();
     while !pending.is_empty() || !running.is_empty() {
         while running.len() < jobs.max(1) {
             let Some(name) = pending.pop() else { break };
-            let child = Command::new(exe).args(args).arg("--fold").arg(name).env("RAYON_NUM_THREADS", "1").spawn()?;
+            let child = Command::new(exe)
+                .args(args)
+                .arg("--fold")
+                .arg(name)
+                .env("RAYON_NUM_THREADS", "1")
+                .spawn()?;
             running.push((name.clone(), child));
         }
         std::thread::sleep(std::time::Duration::from_millis(200));

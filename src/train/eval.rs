@@ -54,8 +54,18 @@ pub struct EvalSettings {
     pub seed: u64,
 }
 
-fn score(sample: &Sample, model: &LoadedModel, selection: Selection, s: &EvalSettings) -> Result<Score, FitError> {
-    let params = ClusterParams::builder().selection(selection).k_max(s.k_max).restarts(s.restarts).seed(s.seed).build()?;
+fn score(
+    sample: &Sample,
+    model: &LoadedModel,
+    selection: Selection,
+    s: &EvalSettings,
+) -> Result<Score, FitError> {
+    let params = ClusterParams::builder()
+        .selection(selection)
+        .k_max(s.k_max)
+        .restarts(s.restarts)
+        .seed(s.seed)
+        .build()?;
     let fit = model.fit(&sample.points, sample.image_size, &params)?;
     Ok(Score {
         k: fit.clustering.k,
@@ -65,7 +75,11 @@ fn score(sample: &Sample, model: &LoadedModel, selection: Selection, s: &EvalSet
 }
 
 /// Evaluates one sample with known K, SOD and silhouette.
-pub fn evaluate_sample(model: &LoadedModel, sample: &Sample, s: &EvalSettings) -> Result<EvalRow, FitError> {
+pub fn evaluate_sample(
+    model: &LoadedModel,
+    sample: &Sample,
+    s: &EvalSettings,
+) -> Result<EvalRow, FitError> {
     Ok(EvalRow {
         name: sample.name.clone(),
         n: sample.points.len(),
@@ -81,7 +95,12 @@ fn summarise(rows: &[EvalRow], pick: fn(&EvalRow) -> Score) -> Summary {
     let (mean_error, median_error) = mean_median(&errors);
     let nmis: Vec<f64> = rows.iter().map(|r| pick(r).nmi).collect();
     let pairs: Vec<(usize, usize)> = rows.iter().map(|r| (r.k_true, pick(r).k)).collect();
-    Summary { mean_error, median_error, mean_nmi: mean_median(&nmis).0, k_correct: model_selection_rate(&pairs) }
+    Summary {
+        mean_error,
+        median_error,
+        mean_nmi: mean_median(&nmis).0,
+        k_correct: model_selection_rate(&pairs),
+    }
 }
 
 /// Totals over evaluated rows.
@@ -144,13 +163,27 @@ mod tests {
     use super::*;
 
     fn row(name: &str, k_true: usize, e: [f64; 3], k: [usize; 3]) -> EvalRow {
-        let s = |i: usize| Score { k: k[i], error: e[i], nmi: 1.0 - e[i] };
-        EvalRow { name: name.into(), n: 10, k_true, known: s(0), sod: s(1), silhouette: s(2) }
+        let s = |i: usize| Score {
+            k: k[i],
+            error: e[i],
+            nmi: 1.0 - e[i],
+        };
+        EvalRow {
+            name: name.into(),
+            n: 10,
+            k_true,
+            known: s(0),
+            sod: s(1),
+            silhouette: s(2),
+        }
     }
 
     #[test]
     fn totals_by_hand() {
-        let rows = [row("a", 2, [0.1, 0.2, 0.3], [2, 2, 3]), row("b", 3, [0.3, 0.4, 0.1], [3, 4, 3])];
+        let rows = [
+            row("a", 2, [0.1, 0.2, 0.3], [2, 2, 3]),
+            row("b", 3, [0.3, 0.4, 0.1], [3, 4, 3]),
+        ];
         let t = totals(&rows);
         assert!((t.known.mean_error - 0.2).abs() < 1e-12);
         assert!((t.sod.mean_error - 0.3).abs() < 1e-12);
@@ -158,6 +191,9 @@ mod tests {
         assert_eq!(t.silhouette.k_correct, 0.5);
         assert_eq!(t.known.k_correct, 1.0);
         let table = format_table(&rows);
-        assert!(table.contains("a ") && table.contains("20.00") && table.contains("50.0%"), "{table}");
+        assert!(
+            table.contains("a ") && table.contains("20.00") && table.contains("50.0%"),
+            "{table}"
+        );
     }
 }

@@ -95,7 +95,8 @@ impl TrainConfig {
             Schedule::Cosine => {
                 let t = epoch as f64 / (self.epochs.max(2) - 1) as f64;
                 let floor = 0.01;
-                self.learning_rate * (floor + (1.0 - floor) * 0.5 * (1.0 + (std::f64::consts::PI * t).cos()))
+                self.learning_rate
+                    * (floor + (1.0 - floor) * 0.5 * (1.0 + (std::f64::consts::PI * t).cos()))
             }
         }
     }
@@ -121,12 +122,20 @@ impl Prepared {
 
 /// Normalises samples (and appends `neighbors` neighbour offsets) as the model will see them at
 /// serving time.
-pub fn prepare(samples: &[Sample], normalization: Normalization, neighbors: usize) -> Vec<Prepared> {
+pub fn prepare(
+    samples: &[Sample],
+    normalization: Normalization,
+    neighbors: usize,
+) -> Vec<Prepared> {
     samples
         .iter()
         .map(|s| Prepared {
             name: s.name.clone(),
-            input: with_neighbors(&normalization.apply(&s.points, s.image_size), s.points.dim(), neighbors),
+            input: with_neighbors(
+                &normalization.apply(&s.points, s.image_size),
+                s.points.dim(),
+                neighbors,
+            ),
             dim: s.points.dim() * (1 + neighbors),
             labels: s.labels.clone(),
             k: s.k,
@@ -179,7 +188,13 @@ pub struct Hooks<'a> {
 
 impl Default for Hooks<'_> {
     fn default() -> Self {
-        Self { stop: None, on_epoch: None, on_step: None, checkpoint: None, resume: false }
+        Self {
+            stop: None,
+            on_epoch: None,
+            on_step: None,
+            checkpoint: None,
+            resume: false,
+        }
     }
 }
 
@@ -200,7 +215,10 @@ fn batches(samples: &[Prepared], batch_size: usize, rng: &mut ChaCha8Rng) -> Vec
     let mut out = Vec::new();
     for i in order {
         let key = (samples[i].n(), samples[i].dim);
-        match open.iter_mut().position(|b| (samples[b[0]].n(), samples[b[0]].dim) == key) {
+        match open
+            .iter_mut()
+            .position(|b| (samples[b[0]].n(), samples[b[0]].dim) == key)
+        {
             Some(p) => {
                 open[p].push(i);
                 if open[p].len() == batch_size {
@@ -215,13 +233,25 @@ fn batches(samples: &[Prepared], batch_size: usize, rng: &mut ChaCha8Rng) -> Vec
 }
 
 /// Mean error rate with known K of `net` on `samples` (seeded k-means, 2 restarts).
-pub fn known_k_error(net: &EmbeddingNet, samples: &[Prepared], embed_dim: usize, device: &Device) -> f64 {
+pub fn known_k_error(
+    net: &EmbeddingNet,
+    samples: &[Prepared],
+    embed_dim: usize,
+    device: &Device,
+) -> f64 {
     let errors: Vec<f64> = samples
         .iter()
         .map(|s| {
             let z = net.embed(&s.input, s.dim, device);
-            let params = ClusterParams::builder().selection(Selection::Fixed(s.k)).restarts(2).seed(0).build();
-            match params.ok().and_then(|p| cluster(Points::new(&z, embed_dim).ok()?, &p).ok()) {
+            let params = ClusterParams::builder()
+                .selection(Selection::Fixed(s.k))
+                .restarts(2)
+                .seed(0)
+                .build();
+            match params
+                .ok()
+                .and_then(|p| cluster(Points::new(&z, embed_dim).ok()?, &p).ok())
+            {
                 Some(c) => error_rate(&s.labels, &c.labels),
                 None => 1.0,
             }
@@ -231,11 +261,19 @@ pub fn known_k_error(net: &EmbeddingNet, samples: &[Prepared], embed_dim: usize,
 }
 
 fn checkpoint_err(path: &Path, e: impl std::fmt::Display) -> TrainError {
-    TrainError::Checkpoint { path: path.to_path_buf(), reason: e.to_string() }
+    TrainError::Checkpoint {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    }
 }
 
 /// Trains a network on `train`, choosing the epoch by `val` (when non-empty).
-pub fn train(config: &TrainConfig, train: &[Prepared], val: &[Prepared], mut hooks: Hooks) -> Result<TrainOutcome, TrainError> {
+pub fn train(
+    config: &TrainConfig,
+    train: &[Prepared],
+    val: &[Prepared],
+    mut hooks: Hooks,
+) -> Result<TrainOutcome, TrainError> {
     config.validate()?;
     if train.is_empty() {
         return Err(TrainError::NoSamples);
@@ -244,11 +282,18 @@ pub fn train(config: &TrainConfig, train: &[Prepared], val: &[Prepared], mut hoo
         if s.dim != config.model.feature_dim() {
             return Err(TrainError::Sample {
                 name: s.name.clone(),
-                reason: format!("rows of {} values, the model takes {}", s.dim, config.model.feature_dim()),
+                reason: format!(
+                    "rows of {} values, the model takes {}",
+                    s.dim,
+                    config.model.feature_dim()
+                ),
             });
         }
         if s.labels.iter().any(|&l| l >= s.k) || s.n() < 2 {
-            return Err(TrainError::Sample { name: s.name.clone(), reason: "labels out of range or fewer than 2 points".into() });
+            return Err(TrainError::Sample {
+                name: s.name.clone(),
+                reason: "labels out of range or fewer than 2 points".into(),
+            });
         }
     }
     let start = Instant::now();
@@ -265,10 +310,15 @@ pub fn train(config: &TrainConfig, train: &[Prepared], val: &[Prepared], mut hoo
     if let (Some(dir), true) = (hooks.checkpoint, hooks.resume) {
         let state_path = dir.join(STATE);
         if state_path.is_file() {
-            let text = std::fs::read_to_string(&state_path).map_err(|e| checkpoint_err(&state_path, e))?;
-            let state: CheckpointState = serde_json::from_str(&text).map_err(|e| checkpoint_err(&state_path, e))?;
+            let text =
+                std::fs::read_to_string(&state_path).map_err(|e| checkpoint_err(&state_path, e))?;
+            let state: CheckpointState =
+                serde_json::from_str(&text).map_err(|e| checkpoint_err(&state_path, e))?;
             if state.config != *config {
-                return Err(checkpoint_err(&state_path, "the checkpoint was made with a different config"));
+                return Err(checkpoint_err(
+                    &state_path,
+                    "the checkpoint was made with a different config",
+                ));
             }
             model = EmbeddingNet::load(&config.model, &dir.join(LAST), &ad)?;
             best = Some(EmbeddingNet::load(&config.model, &dir.join(BEST), &device)?);
@@ -299,7 +349,11 @@ pub fn train(config: &TrainConfig, train: &[Prepared], val: &[Prepared], mut hoo
             let mut input: Vec<f32> = Vec::with_capacity(batch.len() * n * d);
             for &i in batch {
                 input.extend(train[i].input.iter().map(|&v| {
-                    if config.jitter > 0.0 { v + noise.sample(&mut rng) as f32 } else { v }
+                    if config.jitter > 0.0 {
+                        v + noise.sample(&mut rng) as f32
+                    } else {
+                        v
+                    }
                 }));
             }
             let x = Tensor::<3>::from_data(TensorData::new(input, [batch.len(), n, d]), &ad);
@@ -307,13 +361,17 @@ pub fn train(config: &TrainConfig, train: &[Prepared], val: &[Prepared], mut hoo
             let mut loss: Option<Tensor<1>> = None;
             for (b, &i) in batch.iter().enumerate() {
                 let zi = z.clone().narrow(0, b, 1).reshape([n, e]);
-                let li = config.loss.compute(zi, one_hot(&train[i].labels, train[i].k, &ad));
+                let li = config
+                    .loss
+                    .compute(zi, one_hot(&train[i].labels, train[i].k, &ad));
                 loss = Some(match loss {
                     Some(acc) => acc + li,
                     None => li,
                 });
             }
-            let loss = loss.expect("non-empty batch").div_scalar(batch.len() as f64);
+            let loss = loss
+                .expect("non-empty batch")
+                .div_scalar(batch.len() as f64);
             loss_sum += loss.clone().into_scalar::<f32>() as f64;
             let grads = GradientsParams::from_grads(loss.backward(), &model);
             model = optim.step(lr, model, grads);
@@ -353,9 +411,15 @@ pub fn train(config: &TrainConfig, train: &[Prepared], val: &[Prepared], mut hoo
         }
         history.push(log.clone());
         if let Some(dir) = hooks.checkpoint {
-            let state = CheckpointState { config: config.clone(), history: history.clone(), best_epoch, best_score };
+            let state = CheckpointState {
+                config: config.clone(),
+                history: history.clone(),
+                best_epoch,
+                best_score,
+            };
             let path = dir.join(STATE);
-            let text = serde_json::to_string_pretty(&state).map_err(|e| checkpoint_err(&path, e))?;
+            let text =
+                serde_json::to_string_pretty(&state).map_err(|e| checkpoint_err(&path, e))?;
             std::fs::write(&path, text).map_err(|e| checkpoint_err(&path, e))?;
         }
         if let Some(f) = hooks.on_epoch.as_deref_mut() {
@@ -366,8 +430,18 @@ pub fn train(config: &TrainConfig, train: &[Prepared], val: &[Prepared], mut hoo
         Some(net) => net,
         None => model.valid(),
     };
-    let best_val_error = history.iter().find(|h| h.epoch == best_epoch).and_then(|h| h.val_error);
-    Ok(TrainOutcome { net, best_epoch, best_val_error, history, seconds: start.elapsed().as_secs_f64(), interrupted })
+    let best_val_error = history
+        .iter()
+        .find(|h| h.epoch == best_epoch)
+        .and_then(|h| h.val_error);
+    Ok(TrainOutcome {
+        net,
+        best_epoch,
+        best_val_error,
+        history,
+        seconds: start.elapsed().as_secs_f64(),
+        interrupted,
+    })
 }
 
 #[cfg(test)]
@@ -377,7 +451,15 @@ mod tests {
 
     fn tiny_config(loss: Loss) -> TrainConfig {
         TrainConfig {
-            model: ModelConfig { input_dim: 2, width: 16, depth: 1, embed_dim: 3, batch_norm: false, cn_epsilon: 1e-3, neighbors: 0 },
+            model: ModelConfig {
+                input_dim: 2,
+                width: 16,
+                depth: 1,
+                embed_dim: 3,
+                batch_norm: false,
+                cn_epsilon: 1e-3,
+                neighbors: 0,
+            },
             loss,
             learning_rate: 1e-2,
             schedule: Schedule::Constant,
@@ -389,10 +471,17 @@ mod tests {
     }
 
     fn two_lines(count: usize, seed: u64) -> Vec<Prepared> {
-        let cfg = LceConfig { points_per_shape: 16, noise: 0.01 };
+        let cfg = LceConfig {
+            points_per_shape: 16,
+            noise: 0.01,
+        };
         let mut g = LceGenerator::new(seed, cfg);
-        let samples: Vec<Sample> =
-            (0..count).map(|i| g.with_shapes(&[Shape::Line, Shape::Circle], &i.to_string()).sample).collect();
+        let samples: Vec<Sample> = (0..count)
+            .map(|i| {
+                g.with_shapes(&[Shape::Line, Shape::Circle], &i.to_string())
+                    .sample
+            })
+            .collect();
         prepare(&samples, Normalization::CentroidUnitRms, 0)
     }
 
@@ -407,7 +496,11 @@ mod tests {
         all.sort();
         assert_eq!(all, vec![0, 1, 2, 3, 4]);
         for batch in &b {
-            assert!(batch.iter().all(|&i| samples[i].n() == samples[batch[0]].n()));
+            assert!(
+                batch
+                    .iter()
+                    .all(|&i| samples[i].n() == samples[batch[0]].n())
+            );
             assert!(batch.len() <= 2);
         }
     }
@@ -417,15 +510,26 @@ mod tests {
         let train_set = two_lines(8, 2);
         let val = two_lines(2, 3);
         for loss in [Loss::L2, Loss::CrossEntropy, Loss::Mimi { alpha: 0.6 }] {
-            let cfg = TrainConfig { epochs: 6, ..tiny_config(loss) };
+            let cfg = TrainConfig {
+                epochs: 6,
+                ..tiny_config(loss)
+            };
             let a = train(&cfg, &train_set, &val, Hooks::default()).unwrap();
             assert_eq!(a.history.len(), 6);
-            assert!(a.history.last().unwrap().train_loss < a.history[0].train_loss, "{loss:?}: {:?}", a.history);
+            assert!(
+                a.history.last().unwrap().train_loss < a.history[0].train_loss,
+                "{loss:?}: {:?}",
+                a.history
+            );
             assert!(a.best_val_error.is_some());
             let b = train(&cfg, &train_set, &val, Hooks::default()).unwrap();
             let x = &train_set[0].input;
             let device = cpu_device();
-            assert_eq!(a.net.embed(x, 2, &device), b.net.embed(x, 2, &device), "{loss:?} not deterministic");
+            assert_eq!(
+                a.net.embed(x, 2, &device),
+                b.net.embed(x, 2, &device),
+                "{loss:?} not deterministic"
+            );
         }
     }
 
@@ -443,18 +547,34 @@ mod tests {
                 stop.store(true, Ordering::Relaxed);
             }
         };
-        let hooks = Hooks { stop: Some(&stop), on_epoch: Some(&mut on_epoch), checkpoint: Some(&dir), ..Hooks::default() };
+        let hooks = Hooks {
+            stop: Some(&stop),
+            on_epoch: Some(&mut on_epoch),
+            checkpoint: Some(&dir),
+            ..Hooks::default()
+        };
         let first = train(&cfg, &train_set, &[], hooks).unwrap();
         assert!(first.interrupted);
         assert_eq!(first.history.len(), 2);
-        let hooks = Hooks { checkpoint: Some(&dir), resume: true, ..Hooks::default() };
+        let hooks = Hooks {
+            checkpoint: Some(&dir),
+            resume: true,
+            ..Hooks::default()
+        };
         let second = train(&cfg, &train_set, &[], hooks).unwrap();
         assert_eq!(second.history.len(), 3);
         assert_eq!(second.history[..2], first.history[..]);
         // A different config refuses the checkpoint.
         let other = TrainConfig { epochs: 5, ..cfg };
-        let hooks = Hooks { checkpoint: Some(&dir), resume: true, ..Hooks::default() };
-        assert!(matches!(train(&other, &train_set, &[], hooks), Err(TrainError::Checkpoint { .. })));
+        let hooks = Hooks {
+            checkpoint: Some(&dir),
+            resume: true,
+            ..Hooks::default()
+        };
+        assert!(matches!(
+            train(&other, &train_set, &[], hooks),
+            Err(TrainError::Checkpoint { .. })
+        ));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
@@ -462,9 +582,18 @@ mod tests {
     fn rejects_mismatched_samples_and_configs() {
         let mut s = two_lines(1, 5);
         s[0].dim = 4;
-        assert!(matches!(train(&tiny_config(Loss::L2), &s, &[], Hooks::default()), Err(TrainError::Sample { .. })));
-        let bad = TrainConfig { learning_rate: -1.0, ..tiny_config(Loss::L2) };
+        assert!(matches!(
+            train(&tiny_config(Loss::L2), &s, &[], Hooks::default()),
+            Err(TrainError::Sample { .. })
+        ));
+        let bad = TrainConfig {
+            learning_rate: -1.0,
+            ..tiny_config(Loss::L2)
+        };
         assert!(bad.validate().is_err());
-        assert!(matches!(train(&tiny_config(Loss::L2), &[], &[], Hooks::default()), Err(TrainError::NoSamples)));
+        assert!(matches!(
+            train(&tiny_config(Loss::L2), &[], &[], Hooks::default()),
+            Err(TrainError::NoSamples)
+        ));
     }
 }

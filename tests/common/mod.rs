@@ -54,11 +54,20 @@ impl Server {
             s
         });
         let mut line = String::new();
-        BufReader::new(child.stdout.take().expect("stdout")).read_line(&mut line).expect("read stdout");
-        let addr = line.trim().rsplit("http://").next().and_then(|a| a.parse().ok()).unwrap_or_else(|| {
-            panic!("no address announced: {line:?}")
-        });
-        let server = Server { addr, child, stderr: Some(stderr) };
+        BufReader::new(child.stdout.take().expect("stdout"))
+            .read_line(&mut line)
+            .expect("read stdout");
+        let addr = line
+            .trim()
+            .rsplit("http://")
+            .next()
+            .and_then(|a| a.parse().ok())
+            .unwrap_or_else(|| panic!("no address announced: {line:?}"));
+        let server = Server {
+            addr,
+            child,
+            stderr: Some(stderr),
+        };
         let deadline = Instant::now() + Duration::from_secs(30);
         while Instant::now() < deadline {
             if let Ok((200, _)) = server.try_get("/health/ready") {
@@ -79,7 +88,11 @@ impl Server {
     }
 
     pub fn post_json(&self, path: &str, body: &Value) -> Response {
-        self.post_raw(path, Some("application/json"), serde_json::to_vec(body).unwrap())
+        self.post_raw(
+            path,
+            Some("application/json"),
+            serde_json::to_vec(body).unwrap(),
+        )
     }
 
     pub fn post_raw(&self, path: &str, content_type: Option<&str>, body: Vec<u8>) -> Response {
@@ -89,9 +102,16 @@ impl Server {
     /// Sends SIGTERM and waits for the exit status; returns (status code, stderr).
     pub fn terminate(mut self) -> (Option<i32>, String) {
         let pid = self.child.id().to_string();
-        Command::new("kill").args(["-TERM", &pid]).status().expect("kill");
+        Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .expect("kill");
         let status = self.child.wait().expect("wait");
-        let stderr = self.stderr.take().map(|h| h.join().unwrap_or_default()).unwrap_or_default();
+        let stderr = self
+            .stderr
+            .take()
+            .map(|h| h.join().unwrap_or_default())
+            .unwrap_or_default();
         (status.code(), stderr)
     }
 }
@@ -120,46 +140,91 @@ impl Response {
     /// The error code of an error answer (panics when the body is not the error shape).
     pub fn error_code(&self) -> String {
         let v = self.json();
-        let code = v["error"]["code"].as_str().unwrap_or_else(|| panic!("not an error body: {}", self.text()));
-        assert!(v["error"]["message"].is_string(), "error without message: {v}");
+        let code = v["error"]["code"]
+            .as_str()
+            .unwrap_or_else(|| panic!("not an error body: {}", self.text()));
+        assert!(
+            v["error"]["message"].is_string(),
+            "error without message: {v}"
+        );
         code.to_string()
     }
 }
 
 /// One HTTP/1.1 request over a fresh connection.
-pub fn send(addr: SocketAddr, method: &str, path: &str, content_type: Option<&str>, body: Vec<u8>) -> Result<Response, String> {
-    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().map_err(|e| e.to_string())?;
+pub fn send(
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    content_type: Option<&str>,
+    body: Vec<u8>,
+) -> Result<Response, String> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| e.to_string())?;
     rt.block_on(async move {
-        let stream = tokio::net::TcpStream::connect(addr).await.map_err(|e| e.to_string())?;
-        let (mut sender, conn) =
-            hyper::client::conn::http1::handshake(TokioIo::new(stream)).await.map_err(|e| e.to_string())?;
+        let stream = tokio::net::TcpStream::connect(addr)
+            .await
+            .map_err(|e| e.to_string())?;
+        let (mut sender, conn) = hyper::client::conn::http1::handshake(TokioIo::new(stream))
+            .await
+            .map_err(|e| e.to_string())?;
         tokio::spawn(conn);
-        let mut req = hyper::Request::builder().method(method).uri(path).header("host", addr.to_string());
+        let mut req = hyper::Request::builder()
+            .method(method)
+            .uri(path)
+            .header("host", addr.to_string());
         if let Some(ct) = content_type {
             req = req.header("content-type", ct);
         }
-        let req = req.body(Full::new(Bytes::from(body))).map_err(|e| e.to_string())?;
+        let req = req
+            .body(Full::new(Bytes::from(body)))
+            .map_err(|e| e.to_string())?;
         let res = sender.send_request(req).await.map_err(|e| e.to_string())?;
         let status = res.status().as_u16();
         let headers = res.headers().clone();
-        let body = res.into_body().collect().await.map_err(|e| e.to_string())?.to_bytes().to_vec();
-        Ok(Response { status, headers, body })
+        let body = res
+            .into_body()
+            .collect()
+            .await
+            .map_err(|e| e.to_string())?
+            .to_bytes()
+            .to_vec();
+        Ok(Response {
+            status,
+            headers,
+            body,
+        })
     })
 }
 
 /// A dataset sequence file as JSON.
 pub fn dataset(rel: &str) -> Value {
     let path = datasets().join(rel);
-    serde_json::from_slice(&std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
+    serde_json::from_slice(
+        &std::fs::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())),
+    )
+    .unwrap()
 }
 
 /// Labels of a fit answer.
 pub fn labels(v: &Value) -> Vec<usize> {
-    v["labels"].as_array().expect("labels").iter().map(|l| l.as_u64().unwrap() as usize).collect()
+    v["labels"]
+        .as_array()
+        .expect("labels")
+        .iter()
+        .map(|l| l.as_u64().unwrap() as usize)
+        .collect()
 }
 
 /// Ground-truth labels of a dataset file, renumbered 0..K.
 pub fn truth(v: &Value) -> Vec<usize> {
-    let raw: Vec<i64> = v["labels"].as_array().unwrap().iter().map(|l| l.as_i64().unwrap()).collect();
+    let raw: Vec<i64> = v["labels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l.as_i64().unwrap())
+        .collect();
     multifit::data::dataset::renumber(&raw).0
 }

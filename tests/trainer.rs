@@ -1,0 +1,319 @@
+//! End-to-end runs of `multifit-train` on tiny configs: real data from ../shared/datasets and
+//! generated LCE data, seconds not minutes.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+const TINY: [&str; 10] = [
+    "--width",
+    "16",
+    "--depth",
+    "1",
+    "--embed-dim",
+    "4",
+    "--epochs",
+    "2",
+    "--lr",
+    "1e-3",
+];
+
+fn temp(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("multifit-trainer-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn run(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_multifit-train"))
+        .args(args)
+        .env("RAYON_NUM_THREADS", "1")
+        .output()
+        .expect("run multifit-train")
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = run(args);
+    assert!(
+        out.status.success(),
+        "{args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Copies some dataset files into a fresh directory.
+fn subset(tag: &str, dir: &str, names: &[&str]) -> PathBuf {
+    let to = temp(tag);
+    for n in names {
+        std::fs::copy(
+            common::datasets().join(dir).join(format!("{n}.json")),
+            to.join(format!("{n}.json")),
+        )
+        .unwrap();
+    }
+    to
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn gen_lce_writes_readable_samples() {
+    let dir = temp("gen");
+    ok(&[
+        "gen-lce",
+        "--out",
+        s(&dir),
+        "--count",
+        "3",
+        "--seed",
+        "5",
+        "--variant",
+        "unmixed",
+    ]);
+    let files: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+    assert_eq!(files.len(), 3);
+    for f in files {
+        let v: Value = serde_json::from_slice(&std::fs::read(f.unwrap().path()).unwrap()).unwrap();
+        assert_eq!(v["kind"], "points2d");
+        let k = v["num_models"].as_u64().unwrap();
+        assert!((2..=4).contains(&k));
+        assert_eq!(v["points"].as_array().unwrap().len() as u64, 50 * k);
+    }
+}
+
+#[test]
+fn train_then_eval_on_kt3dmoseg_clips() {
+    let data = subset(
+        "kt",
+        "kt3dmoseg",
+        &["Seq028_Clip02", "Seq028_clip03", "Seq070_Clip01"],
+    );
+    let out = temp("kt-model");
+    let run_dir = temp("kt-run");
+    let mut args = vec![
+        "train",
+        "--name",
+        "tiny-kt",
+        "--data",
+        s(&data),
+        "--protocol",
+        "augment",
+        "--out",
+        s(&out),
+        "--run-dir",
+        s(&run_dir),
+    ];
+    args.extend(TINY);
+    ok(&args);
+    let card: Value =
+        serde_json::from_slice(&std::fs::read(out.join("model.json")).unwrap()).unwrap();
+    assert_eq!(card["kind"], "trajectories");
+    assert_eq!(card["input_dim"], 10);
+    assert!(
+        card["training"]["command"]
+            .as_str()
+            .unwrap()
+            .contains("--protocol augment")
+    );
+    assert!(out.join("weights.safetensors").is_file());
+    let log = std::fs::read_to_string(run_dir.join("train.jsonl")).unwrap();
+    assert_eq!(log.lines().count(), 2, "one JSONL line per epoch");
+
+    // eval on the first-5-frame files, JSON output, recorded in the card.
+    let first5 = subset(
+        "kt5",
+        "kt3dmoseg_first5",
+        &["Seq028_Clip02", "Seq070_Clip01"],
+    );
+    let text = ok(&[
+        "eval",
+        "--model",
+        s(&out),
+        "--data",
+        s(&first5),
+        "--json",
+        "--record",
+        "test_error",
+    ]);
+    let v: Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["rows"].as_array().unwrap().len(), 2);
+    let e = v["totals"]["known"]["mean_error"].as_f64().unwrap();
+    assert!((0.0..=1.0).contains(&e));
+    let card: Value =
+        serde_json::from_slice(&std::fs::read(out.join("model.json")).unwrap()).unwrap();
+    assert!(
+        card["metrics"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|m| m["name"] == "test_error")
+    );
+    // The trained model directory loads in the server's registry.
+    multifit::registry::LoadedModel::load(&out).expect("servable model directory");
+}
+
+#[test]
+fn train_on_lce_batches_with_validation() {
+    let train_dir = temp("lce-train");
+    let val_dir = temp("lce-val");
+    ok(&[
+        "gen-lce",
+        "--out",
+        s(&train_dir),
+        "--count",
+        "8",
+        "--seed",
+        "1",
+        "--points-per-shape",
+        "12",
+    ]);
+    ok(&[
+        "gen-lce",
+        "--out",
+        s(&val_dir),
+        "--count",
+        "2",
+        "--seed",
+        "2",
+        "--points-per-shape",
+        "12",
+    ]);
+    let out = temp("lce-model");
+    let run_dir = temp("lce-run");
+    let mut args = vec![
+        "train",
+        "--name",
+        "tiny-lce",
+        "--data",
+        s(&train_dir),
+        "--val",
+        s(&val_dir),
+        "--batch-size",
+        "4",
+        "--neighbors",
+        "3",
+        "--out",
+        s(&out),
+        "--run-dir",
+        s(&run_dir),
+    ];
+    args.extend(TINY);
+    ok(&args);
+    let card: Value =
+        serde_json::from_slice(&std::fs::read(out.join("model.json")).unwrap()).unwrap();
+    assert_eq!(card["architecture"]["neighbors"], 3);
+    assert_eq!(card["normalization"], "centroid_unit_rms");
+    assert!(
+        card["metrics"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|m| m["name"] == "validation_error_known_k")
+    );
+}
+
+#[test]
+fn cv_resumes_and_summarises_on_adelaide() {
+    let data = subset("ad", "adelaidermf", &["biscuit", "book", "cube"]);
+    let out = temp("cv");
+    let mut base = vec![
+        "cv",
+        "--data",
+        s(&data),
+        "--model-type",
+        "fundamental",
+        "--out",
+        s(&out),
+        "--k-max",
+        "4",
+    ];
+    base.extend(TINY);
+    let mut one = base.clone();
+    one.extend(["--fold", "book"]);
+    ok(&one);
+    let fold = out.join("folds").join("book.json");
+    let before = std::fs::metadata(&fold).unwrap().modified().unwrap();
+    let text = ok(&[base.as_slice(), &["--json"][..]].concat());
+    // The finished fold was kept, not retrained.
+    assert_eq!(
+        std::fs::metadata(&fold).unwrap().modified().unwrap(),
+        before
+    );
+    let v: Value = serde_json::from_str(&text).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 3);
+    assert!(
+        rows.iter().all(|r| r["k_true"].as_u64().unwrap() >= 2),
+        "outliers count as a group"
+    );
+    assert!(out.join("summary.json").is_file());
+}
+
+#[test]
+fn bad_data_stops_before_training_naming_the_file() {
+    let dir = temp("bad-json");
+    std::fs::write(dir.join("broken.json"), b"{ this is not json").unwrap();
+    let out = run(&[
+        "train",
+        "--name",
+        "x",
+        "--data",
+        s(&dir),
+        "--out",
+        s(&temp("bad-out")),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("broken.json"), "{err}");
+
+    let dir = temp("bad-row");
+    let mut v: Value = serde_json::from_slice(
+        &std::fs::read(common::datasets().join("adelaidermf/biscuit.json")).unwrap(),
+    )
+    .unwrap();
+    v["points"][3] = serde_json::json!([1.0, 2.0, 3.0]);
+    std::fs::write(dir.join("ragged.json"), serde_json::to_vec(&v).unwrap()).unwrap();
+    let out = run(&[
+        "train",
+        "--name",
+        "x",
+        "--data",
+        s(&dir),
+        "--out",
+        s(&temp("bad-out2")),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("ragged.json") && err.contains("row 3"),
+        "{err}"
+    );
+
+    let dir = temp("no-labels");
+    v = serde_json::from_slice(
+        &std::fs::read(common::datasets().join("adelaidermf/biscuit.json")).unwrap(),
+    )
+    .unwrap();
+    v.as_object_mut().unwrap().remove("labels");
+    std::fs::write(dir.join("unlabelled.json"), serde_json::to_vec(&v).unwrap()).unwrap();
+    let out = run(&[
+        "train",
+        "--name",
+        "x",
+        "--data",
+        s(&dir),
+        "--out",
+        s(&temp("bad-out3")),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("unlabelled.json") && err.contains("labels"),
+        "{err}"
+    );
+}
