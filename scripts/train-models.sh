@@ -17,11 +17,11 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
           --describe "KT3DMoSeg, all 22 sequences, 'Augment' protocol: every non-overlapping 5-frame clip (75 clips)" ;;
       adelaide-homography)
         $T train --name adelaide-homography --data "$data/adelaidermf" --model-type homography \
-          --loss mimi --embed-dim 8 --width 128 --depth 12 --lr 1e-3 --schedule cosine --epochs 200 --k-max 8 \
+          --loss mimi --embed-dim 8 --width 128 --depth 12 --lr 1e-3 --schedule cosine --epochs 100 --k-max 8 \
           --describe "AdelaideRMF homography (planes), all 17 available pairs, outliers as one more group" ;;
       adelaide-fundamental)
         $T train --name adelaide-fundamental --data "$data/adelaidermf" --model-type fundamental \
-          --loss mimi --embed-dim 6 --width 128 --depth 12 --lr 1e-3 --schedule cosine --epochs 200 --k-max 8 \
+          --loss mimi --embed-dim 6 --width 128 --depth 12 --lr 1e-3 --schedule cosine --epochs 100 --k-max 8 \
           --describe "AdelaideRMF fundamental (rigid motions), all 19 pairs, outliers as one more group" ;;
       lce)
         [ -d runs/data/lce-train ] || $T gen-lce --out runs/data/lce-train --count 4000 --seed 1 --variant mixed
