@@ -1,4 +1,6 @@
-//! Core benchmarks: network forward, k-means with K selection, and training steps.
+//! Core benchmarks: network forward (burn, fused serving path, and the bare matrix multiplies of
+//! the same shapes as the floor), k-means with K selection, the whole fit of a shipped model, and
+//! training steps.
 //! Run: `cargo bench --bench core` (add `-- quick` for fewer repetitions). Prints medians.
 
 use std::time::Instant;
@@ -6,8 +8,12 @@ use std::time::Instant;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::prelude::*;
 use multifit::cluster::{ClusterParams, Points, Selection, cluster};
+use multifit::data::{ImageSize, Kind, PointSet};
 use multifit::loss::{Loss, one_hot};
-use multifit::model::{ModelConfig, cpu_device};
+use multifit::model::gemm::matmul;
+use multifit::model::{FusedNet, ModelConfig, Threads, cpu_device};
+use multifit::registry::LoadedModel;
+use rayon::prelude::*;
 
 fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {
     f(); // warm-up
@@ -46,18 +52,66 @@ fn main() {
         neighbors: 0,
     };
     let net = cfg.init(&device).expect("config");
+    let fused = FusedNet::from_net(&net).expect("fused weights");
+    let (d, w, e) = (cfg.input_dim, cfg.width, cfg.embed_dim);
+    let gflops =
+        |n: usize, ms: f64| 2.0 * cfg.macs_per_point() as f64 * n as f64 / (ms * 1e-3) / 1e9;
+    println!("forward: width 128, 12 blocks, D=4, E=6; GFLOP/s counts the matrix multiplies only");
     for n in [1000, 5000] {
-        let x = pseudo(n * 4, n);
-        let ms = median_ms(reps, || {
-            std::hint::black_box(net.embed(&x, 4, &device));
+        let x = pseudo(n * d, n);
+        let burn_ms = median_ms(reps, || {
+            std::hint::black_box(net.embed(&x, d, &device));
         });
-        let gflops = 2.0 * cfg.macs_per_point() as f64 * n as f64 / (ms * 1e-3) / 1e9;
         println!(
-            "forward  N={n:>5}  width 128, 12 blocks, D=4, E=6: {ms:>8.2} ms  ({gflops:.1} GFLOP/s in matmuls)"
+            "forward  N={n:>5}  burn (all threads)    : {burn_ms:>8.2} ms  ({:.1} GFLOP/s)",
+            gflops(n, burn_ms)
         );
+        for threads in [1, 2] {
+            let pool = Threads::new(threads).expect("threads");
+            let fused_ms = median_ms(reps, || {
+                std::hint::black_box(fused.forward(&x, &pool));
+            });
+            // The floor: the same matrix multiplies with nothing between them, the rows split in
+            // `threads` equal parts, one single-threaded sgemm call per part and layer.
+            let (wd, ww, we) = (pseudo(d * w, 1), pseudo(w * w, 2), pseudo(w * e, 3));
+            let rows = n.div_ceil(threads);
+            let mut parts: Vec<(&[f32], Vec<f32>, Vec<f32>, Vec<f32>)> = x
+                .chunks(rows * d)
+                .map(|p| {
+                    let r = p.len() / d;
+                    (p, vec![0f32; r * w], vec![0f32; r * w], vec![0f32; r * e])
+                })
+                .collect();
+            let floor = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let floor_ms = median_ms(reps, || {
+                floor.install(|| {
+                    parts.par_iter_mut().for_each(|(p, h, h2, z)| {
+                        matmul(p, d, &wd, w, h);
+                        for _ in 0..cfg.depth {
+                            matmul(h, w, &ww, w, h2);
+                            matmul(h2, w, &ww, w, h);
+                        }
+                        matmul(h, w, &we, e, z);
+                    })
+                });
+                std::hint::black_box(&parts);
+            });
+            println!(
+                "forward  N={n:>5}  fused, {threads} thread(s)   : {fused_ms:>8.2} ms  ({:.1} GFLOP/s); \
+                 bare sgemm {floor_ms:.2} ms ({:.1} GFLOP/s); fused at {:.0} % of sgemm throughput; \
+                 {:.1}x faster than burn",
+                gflops(n, fused_ms),
+                gflops(n, floor_ms),
+                100.0 * floor_ms / fused_ms,
+                burn_ms / fused_ms
+            );
+        }
     }
 
-    for n in [1000, 5000] {
+    for n in [1000, 5000, 20000] {
         // Embeddings of 4 noisy groups on the unit sphere in 6D.
         let mut z = pseudo(n * 6, 7);
         for (i, row) in z.chunks_mut(6).enumerate() {
@@ -78,6 +132,49 @@ fn main() {
             println!(
                 "cluster  N={n:>5}  K=1..8, 4 restarts, {:<10}: {ms:>8.2} ms",
                 sel.name()
+            );
+        }
+    }
+
+    // The whole fit (normalise, embed, cluster) of a shipped model on 4 planes of pseudo-random
+    // correspondences: what one request costs the server beyond HTTP and JSON.
+    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
+    for n in [1000, 5000, 20000] {
+        let rows: Vec<Vec<f64>> = pseudo(n * 4, 11)
+            .chunks(4)
+            .enumerate()
+            .map(|(i, r)| {
+                let (x, y, g) = (
+                    f64::from(r[0]) * 400.0 + 500.0,
+                    f64::from(r[1]) * 300.0 + 400.0,
+                    (i % 4) as f64,
+                );
+                vec![
+                    x,
+                    y,
+                    x * (1.0 + 0.05 * g) + 20.0 * g,
+                    y + 10.0 * g * g + f64::from(r[2]),
+                ]
+            })
+            .collect();
+        let points = PointSet::from_rows(Kind::Correspondences, &rows).expect("points");
+        let image = Some(ImageSize::new(1024.0, 768.0).expect("image size"));
+        for threads in [1, 2] {
+            let model = LoadedModel::load(&models.join("adelaide-homography"))
+                .expect("shipped model")
+                .with_threads(threads)
+                .expect("threads");
+            let p = ClusterParams::builder()
+                .k_max(8)
+                .selection(Selection::Silhouette)
+                .seed(1)
+                .build()
+                .unwrap();
+            let ms = median_ms(reps.min(5), || {
+                std::hint::black_box(model.fit(&points, image, &p).unwrap());
+            });
+            println!(
+                "fit      N={n:>5}  adelaide-homography, silhouette K=1..8, {threads} thread(s): {ms:>8.2} ms"
             );
         }
     }

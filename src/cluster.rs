@@ -315,45 +315,76 @@ pub fn kmeans(p: Points, k: usize, restarts: usize, max_iter: usize, seed: u64) 
 /// Mean silhouette of a labelling (Euclidean distances), exact on the given rows.
 /// Needs at least two clusters; a point alone in its cluster scores 0.
 pub fn silhouette(p: Points, labels: &[usize], k: usize) -> f64 {
+    silhouettes(p, &[(labels, k)])[0]
+}
+
+/// The mean silhouette of several labellings `(labels, k)` of the same rows, exact. Every
+/// pairwise distance is computed once (O(N^2 dim) time for all labellings together) and summed
+/// into per-point, per-cluster totals (O(N sum k) memory, never N^2).
+pub fn silhouettes(p: Points, labelings: &[(&[usize], usize)]) -> Vec<f64> {
     let n = p.len();
-    let mut counts = vec![0usize; k];
-    for &l in labels {
-        counts[l] += 1;
-    }
-    let mut sums = vec![0f64; k];
-    let mut total = 0.0;
+    // sums[l][i * k_l + c]: the distances from point i to the points of cluster c of labelling l.
+    let mut sums: Vec<Vec<f64>> = labelings.iter().map(|&(_, k)| vec![0.0; n * k]).collect();
+    let mut dist = vec![0f32; n];
     for i in 0..n {
-        sums.iter_mut().for_each(|s| *s = 0.0);
         let zi = p.row(i);
-        for j in 0..n {
-            let d: f32 = zi
+        for (j, d) in dist.iter_mut().enumerate().skip(i + 1) {
+            *d = zi
                 .iter()
                 .zip(p.row(j))
                 .map(|(a, b)| (a - b) * (a - b))
-                .sum();
-            sums[labels[j]] += d.sqrt() as f64;
+                .sum::<f32>()
+                .sqrt();
         }
-        let own = labels[i];
-        if counts[own] <= 1 {
-            continue;
-        }
-        let a = sums[own] / (counts[own] - 1) as f64;
-        let b = (0..k)
-            .filter(|&c| c != own && counts[c] > 0)
-            .map(|c| sums[c] / counts[c] as f64)
-            .fold(f64::INFINITY, f64::min);
-        if b.is_finite() && a.max(b) > 0.0 {
-            total += (b - a) / a.max(b);
+        for (&(labels, k), sums) in labelings.iter().zip(&mut sums) {
+            let ci = labels[i];
+            let (head, tail) = sums.split_at_mut((i + 1) * k);
+            let own = &mut head[i * k..];
+            for (j, &d) in dist.iter().enumerate().skip(i + 1) {
+                let d = f64::from(d);
+                own[labels[j]] += d;
+                tail[(j - i - 1) * k + ci] += d;
+            }
         }
     }
-    total / n as f64
+    labelings
+        .iter()
+        .zip(&sums)
+        .map(|(&(labels, k), sums)| {
+            let mut counts = vec![0usize; k];
+            for &l in labels {
+                counts[l] += 1;
+            }
+            let total: f64 = (0..n)
+                .map(|i| {
+                    let own = labels[i];
+                    if counts[own] <= 1 {
+                        return 0.0;
+                    }
+                    let row = &sums[i * k..(i + 1) * k];
+                    let a = row[own] / (counts[own] - 1) as f64;
+                    let b = (0..k)
+                        .filter(|&c| c != own && counts[c] > 0)
+                        .map(|c| row[c] / counts[c] as f64)
+                        .fold(f64::INFINITY, f64::min);
+                    if b.is_finite() && a.max(b) > 0.0 {
+                        (b - a) / a.max(b)
+                    } else {
+                        0.0
+                    }
+                })
+                .sum();
+            total / n as f64
+        })
+        .collect()
 }
 
-/// Silhouette of K's labelling, on a seeded sample when the set is large.
-fn silhouette_score(p: Points, labels: &[usize], k: usize, seed: u64) -> f64 {
+/// The silhouettes of several labellings `(labels, k)`, on one seeded sample of
+/// [`SILHOUETTE_EXACT_MAX`] points when the set is larger.
+fn silhouette_scores(p: Points, labelings: &[(&[usize], usize)], seed: u64) -> Vec<f64> {
     let n = p.len();
     if n <= SILHOUETTE_EXACT_MAX {
-        return silhouette(p, labels, k);
+        return silhouettes(p, labelings);
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5151);
     let mut idx: Vec<usize> = (0..n).collect();
@@ -363,14 +394,21 @@ fn silhouette_score(p: Points, labels: &[usize], k: usize, seed: u64) -> f64 {
     }
     idx.truncate(SILHOUETTE_EXACT_MAX);
     let data: Vec<f32> = idx.iter().flat_map(|&i| p.row(i).iter().copied()).collect();
-    let sub_labels: Vec<usize> = idx.iter().map(|&i| labels[i]).collect();
-    silhouette(
+    let sub_labels: Vec<Vec<usize>> = labelings
+        .iter()
+        .map(|(labels, _)| idx.iter().map(|&i| labels[i]).collect())
+        .collect();
+    let sub: Vec<(&[usize], usize)> = sub_labels
+        .iter()
+        .zip(labelings)
+        .map(|(l, &(_, k))| (l.as_slice(), k))
+        .collect();
+    silhouettes(
         Points {
             data: &data,
             dim: p.dim,
         },
-        &sub_labels,
-        k,
+        &sub,
     )
 }
 
@@ -443,9 +481,14 @@ pub fn cluster(p: Points, params: &ClusterParams) -> Result<Clustering, ClusterE
                     .into_iter()
                     .filter(|s| s.0 <= k_max)
                     .collect(),
-                _ => (2..=k_max)
-                    .map(|k| (k, silhouette_score(p, &runs[k - 1].labels, k, seed)))
-                    .collect(),
+                _ => {
+                    let labelings: Vec<(&[usize], usize)> = (2..=k_max)
+                        .map(|k| (runs[k - 1].labels.as_slice(), k))
+                        .collect();
+                    (2..=k_max)
+                        .zip(silhouette_scores(p, &labelings, seed))
+                        .collect()
+                }
             };
             let single = k_max == 1 || residuals[0].1 / (n as f64) < params.single_spread;
             let k = if single {
@@ -584,6 +627,56 @@ mod tests {
         let data = [0.0f32, 1.0, 4.0];
         let s = silhouette(Points::new(&data, 1).unwrap(), &[0, 0, 1], 2);
         assert!((s - (0.75 + 2.0 / 3.0) / 3.0).abs() < 1e-6);
+    }
+
+    /// The definition, one point and one labelling at a time.
+    fn silhouette_reference(p: Points, labels: &[usize], k: usize) -> f64 {
+        let n = p.len();
+        let dist = |i: usize, j: usize| -> f64 {
+            p.row(i)
+                .iter()
+                .zip(p.row(j))
+                .map(|(a, b)| f64::from(a - b).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        };
+        let mut total = 0.0;
+        for i in 0..n {
+            let mean_to = |c: usize| {
+                let others: Vec<usize> = (0..n).filter(|&j| j != i && labels[j] == c).collect();
+                (!others.is_empty())
+                    .then(|| others.iter().map(|&j| dist(i, j)).sum::<f64>() / others.len() as f64)
+            };
+            let Some(a) = mean_to(labels[i]) else {
+                continue;
+            };
+            let b = (0..k)
+                .filter(|&c| c != labels[i])
+                .filter_map(mean_to)
+                .fold(f64::INFINITY, f64::min);
+            total += (b - a) / a.max(b);
+        }
+        total / n as f64
+    }
+
+    #[test]
+    fn silhouettes_of_several_labellings_match_the_definition() {
+        let (data, truth) = blobs(3, 20);
+        let p = Points::new(&data, 2).unwrap();
+        let n = truth.len();
+        let shuffled: Vec<usize> = (0..n).map(|i| (i * 7) % 4).collect();
+        let split: Vec<usize> = truth
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| t * 2 + i % 2)
+            .collect();
+        let labelings: Vec<(&[usize], usize)> = vec![(&truth, 3), (&shuffled, 4), (&split, 6)];
+        let got = silhouettes(p, &labelings);
+        for (&(labels, k), s) in labelings.iter().zip(&got) {
+            let want = silhouette_reference(p, labels, k);
+            assert!((s - want).abs() < 1e-6, "k {k}: {s} vs {want}");
+        }
+        assert!(got[0] > 0.9 && got[1] < 0.1, "{got:?}");
     }
 
     #[test]

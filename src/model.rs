@@ -10,6 +10,9 @@
 //! The optional BatchNorm follows CNe; note that after CN every channel already has zero mean and
 //! unit variance over each set, so BatchNorm adds little beyond its learned scale and shift.
 
+pub mod fused;
+pub mod gemm;
+
 use std::path::Path;
 
 use burn::module::Module;
@@ -18,6 +21,8 @@ use burn::prelude::*;
 use burn::store::{ModuleSnapshot, SafetensorsStore};
 use burn::tensor::activation::relu;
 use serde::{Deserialize, Serialize};
+
+pub use fused::{FusedNet, Threads};
 
 /// Architecture of the embedding network; stored in every model card.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -12,7 +12,7 @@ use crate::cluster::{self, ClusterError, ClusterParams, Clustering, Points, Sele
 use crate::data::features::with_neighbors;
 use crate::data::{ImageSize, Kind, Normalization, PointSet};
 use crate::loss::Loss;
-use crate::model::{EmbeddingNet, ModelConfig, ModelError, cpu_device};
+use crate::model::{EmbeddingNet, FusedNet, ModelConfig, ModelError, Threads, cpu_device};
 
 /// File names inside a model directory.
 pub const CARD_FILE: &str = "model.json";
@@ -146,11 +146,15 @@ impl ModelCard {
     }
 }
 
-/// A model ready to fit point sets.
+/// A model ready to fit point sets. Embeddings come from the fused serving forward
+/// ([`FusedNet`]); the burn network is kept for training-side use and for cross-checks.
 #[derive(Debug)]
 pub struct LoadedModel {
     pub card: ModelCard,
     pub net: EmbeddingNet,
+    fused: FusedNet,
+    /// Threads one fit's forward pass may use.
+    threads: Threads,
     device: Device,
 }
 
@@ -190,12 +194,43 @@ impl LoadedModel {
         let card = ModelCard::read(dir)?;
         let device = cpu_device();
         let net = EmbeddingNet::load(&card.architecture, &dir.join(WEIGHTS_FILE), &device)?;
-        Ok(Self { card, net, device })
+        Ok(Self::from_parts(card, net, device)?)
     }
 
-    /// Wraps a freshly trained network.
-    pub fn from_parts(card: ModelCard, net: EmbeddingNet, device: Device) -> Self {
-        Self { card, net, device }
+    /// Wraps a freshly trained network. Fits run on the calling thread until
+    /// [`LoadedModel::with_threads`] says otherwise.
+    pub fn from_parts(
+        card: ModelCard,
+        net: EmbeddingNet,
+        device: Device,
+    ) -> Result<Self, ModelError> {
+        let fused = FusedNet::from_net(&net)?;
+        Ok(Self {
+            card,
+            net,
+            fused,
+            threads: Threads::default(),
+            device,
+        })
+    }
+
+    /// Gives each fit's forward pass `threads` threads of a pool of this model's own: a server
+    /// running W fits at once on C cores gives each C / W, so threads are never oversubscribed.
+    pub fn with_threads(mut self, threads: usize) -> Result<Self, ModelError> {
+        self.threads = Threads::new(threads)?;
+        Ok(self)
+    }
+
+    /// Threads one fit's forward pass may use.
+    pub fn threads(&self) -> usize {
+        self.threads.count()
+    }
+
+    /// Embeddings by the burn forward (training's code path), for cross-checks:
+    /// features `[n, feature_dim]` -> `[n, e]`.
+    pub fn embed_burn(&self, features: &[f32]) -> Vec<f32> {
+        self.net
+            .embed(features, self.card.architecture.feature_dim(), &self.device)
     }
 
     /// Network input for `points` (normalised, neighbour offsets appended), checking kind and
@@ -227,10 +262,9 @@ impl LoadedModel {
         ))
     }
 
-    /// Embeddings of prepared input `[n, feature_dim]` -> `[n, e]`.
+    /// Embeddings of prepared input by the fused forward: `[n, feature_dim]` -> `[n, e]`.
     pub fn embed(&self, features: &[f32]) -> Vec<f32> {
-        self.net
-            .embed(features, self.card.architecture.feature_dim(), &self.device)
+        self.fused.forward(features, &self.threads)
     }
 
     /// Normalise, embed and cluster one point set.

@@ -31,6 +31,9 @@ pub struct ServerConfig {
     pub queue_capacity: usize,
     pub request_timeout: Duration,
     pub workers: usize,
+    /// Threads one fit may use (matrix multiplies); `workers * fit_threads` should not exceed
+    /// the cores.
+    pub fit_threads: usize,
     pub log_format: LogFormat,
 }
 
@@ -72,6 +75,9 @@ impl ServerConfig {
         if self.workers == 0 {
             return bad("workers must be at least 1");
         }
+        if self.fit_threads == 0 {
+            return bad("fit threads must be at least 1");
+        }
         if self.request_timeout.is_zero() {
             return bad("request timeout must be positive");
         }
@@ -106,14 +112,23 @@ pub async fn serve(
     let (failed_tx, failed_rx) = tokio::sync::oneshot::channel::<RegistryError>();
     let loader_state = state.clone();
     let dir = config.models.clone();
-    tokio::task::spawn_blocking(move || match load_all(&dir) {
-        Ok(models) => {
-            let names: Vec<&String> = models.keys().collect();
-            tracing::info!(?names, "models loaded; ready");
-            loader_state.set_models(models);
-        }
-        Err(e) => {
-            let _ = failed_tx.send(e);
+    let fit_threads = config.fit_threads;
+    tokio::task::spawn_blocking(move || {
+        let loaded = load_all(&dir).and_then(|models| {
+            models
+                .into_iter()
+                .map(|(name, m)| Ok((name, m.with_threads(fit_threads)?)))
+                .collect::<Result<std::collections::BTreeMap<_, _>, RegistryError>>()
+        });
+        match loaded {
+            Ok(models) => {
+                let names: Vec<&String> = models.keys().collect();
+                tracing::info!(?names, fit_threads, "models loaded; ready");
+                loader_state.set_models(models);
+            }
+            Err(e) => {
+                let _ = failed_tx.send(e);
+            }
         }
     });
 

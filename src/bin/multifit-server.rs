@@ -42,6 +42,10 @@ struct Args {
     /// Fits computed at once (default: available parallelism, which respects cgroup limits).
     #[arg(long, env = "MULTIFIT_WORKERS")]
     workers: Option<usize>,
+    /// Threads each fit may use (default: available parallelism / workers, at least 1, so that
+    /// workers x fit threads never exceeds the cores).
+    #[arg(long, env = "MULTIFIT_FIT_THREADS")]
+    fit_threads: Option<usize>,
     /// Log format.
     #[arg(long, env = "MULTIFIT_LOG_FORMAT", value_enum, default_value = "text")]
     log_format: LogFormat,
@@ -49,6 +53,8 @@ struct Args {
 
 impl Args {
     fn into_config(self) -> ServerConfig {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let workers = self.workers.unwrap_or(cores);
         ServerConfig {
             addr: self.addr,
             models: self.models,
@@ -61,9 +67,8 @@ impl Args {
             },
             queue_capacity: self.queue_capacity,
             request_timeout: Duration::from_millis(self.request_timeout_ms),
-            workers: self
-                .workers
-                .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+            workers,
+            fit_threads: self.fit_threads.unwrap_or((cores / workers.max(1)).max(1)),
             log_format: self.log_format,
         }
     }

@@ -142,7 +142,7 @@ pub fn run_fold(
         spec.eval.k_max,
         info,
     );
-    let model = LoadedModel::from_parts(card, outcome.net, crate::model::cpu_device());
+    let model = LoadedModel::from_parts(card, outcome.net, crate::model::cpu_device())?;
     let row = evaluate_sample(&model, &test, &spec.eval).map_err(|e| TrainError::Sample {
         name: name.clone(),
         reason: e.to_string(),
