@@ -46,7 +46,10 @@ fn fused_forward_matches_burn_on_every_shipped_model() {
             let input = model.prepare(&sample.points, sample.image_size).unwrap();
             let burn = model.embed_burn(&input);
             for threads in [1, 2] {
-                let model = LoadedModel::load(&dir).unwrap().with_threads(threads).unwrap();
+                let model = LoadedModel::load(&dir)
+                    .unwrap()
+                    .with_threads(threads)
+                    .unwrap();
                 let fused = model.embed(&input);
                 assert_eq!(fused.len(), burn.len());
                 let diff = fused
@@ -68,7 +71,12 @@ fn fused_forward_matches_burn_on_every_shipped_model() {
                     .unwrap();
                 let a = cluster(Points::new(&fused, e).unwrap(), &params).unwrap();
                 let b = cluster(Points::new(&burn, e).unwrap(), &params).unwrap();
-                let agree = a.labels.iter().zip(&b.labels).filter(|(x, y)| x == y).count();
+                let agree = a
+                    .labels
+                    .iter()
+                    .zip(&b.labels)
+                    .filter(|(x, y)| x == y)
+                    .count();
                 assert!(
                     agree as f64 >= 0.99 * a.labels.len() as f64,
                     "{name} on {}: labels agree on {agree} of {}",
@@ -82,7 +90,12 @@ fn fused_forward_matches_burn_on_every_shipped_model() {
     checked.sort();
     assert_eq!(
         checked,
-        ["adelaide-fundamental", "adelaide-homography", "kt3dmoseg", "lce"],
+        [
+            "adelaide-fundamental",
+            "adelaide-homography",
+            "kt3dmoseg",
+            "lce"
+        ],
         "every shipped model is checked"
     );
 }
