@@ -8,7 +8,7 @@ use std::time::Instant;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::prelude::*;
 use multifit::cluster::{ClusterParams, Points, Selection, cluster};
-use multifit::data::{ImageSize, Kind, PointSet};
+use multifit::data::{ImageSize, Kind, PointSet, Sequence};
 use multifit::loss::{Loss, one_hot};
 use multifit::model::gemm::matmul;
 use multifit::model::{FusedNet, ModelConfig, Threads, cpu_device};
@@ -111,6 +111,30 @@ fn main() {
         }
     }
 
+    // Real embeddings: the shipped adelaide-homography model on the AdelaideRMF pair bonhall
+    // (1068 correspondences, 6 planes and outliers), E = 8.
+    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets");
+    let model = LoadedModel::load(&models.join("adelaide-homography")).expect("shipped model");
+    let pair = Sequence::load(&data.join("adelaidermf/bonhall.json")).expect("dataset");
+    let z = model.embed(&model.prepare(&pair.points, pair.image_size).expect("input"));
+    for sel in [Selection::Sod, Selection::Silhouette] {
+        let p = ClusterParams::builder()
+            .k_max(8)
+            .selection(sel)
+            .seed(1)
+            .build()
+            .unwrap();
+        let ms = median_ms(reps, || {
+            std::hint::black_box(cluster(Points::new(&z, 8).unwrap(), &p).unwrap());
+        });
+        println!(
+            "cluster  N={:>5}  K=1..8, 4 restarts, {:<10}: {ms:>8.2} ms  (real embeddings: bonhall)",
+            pair.points.len(),
+            sel.name()
+        );
+    }
+
     for n in [1000, 5000, 20000] {
         // Embeddings of 4 noisy groups on the unit sphere in 6D.
         let mut z = pseudo(n * 6, 7);
@@ -138,7 +162,6 @@ fn main() {
 
     // The whole fit (normalise, embed, cluster) of a shipped model on 4 planes of pseudo-random
     // correspondences: what one request costs the server beyond HTTP and JSON.
-    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
     for n in [1000, 5000, 20000] {
         let rows: Vec<Vec<f64>> = pseudo(n * 4, 11)
             .chunks(4)

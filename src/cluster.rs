@@ -245,15 +245,28 @@ fn lloyd(p: Points, k: usize, mut centroids: Vec<f64>, max_iter: usize) -> KMean
     let (n, dim) = (p.len(), p.dim);
     let mut labels = vec![usize::MAX; n];
     let mut dist = vec![0f64; n];
+    let mut near = vec![0f32; k * dim];
     for _ in 0..max_iter {
         let mut changed = false;
-        for i in 0..n {
-            let (best, d) = (0..k)
-                .map(|c| (c, sq_dist(p.row(i), &centroids[c * dim..(c + 1) * dim])))
-                .fold((0, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
-            dist[i] = d;
-            if labels[i] != best {
-                labels[i] = best;
+        // Assignment in f32 (the embeddings' own precision); sums and residuals in f64.
+        near.iter_mut()
+            .zip(&centroids)
+            .for_each(|(f, &c)| *f = c as f32);
+        for (i, row) in p.data.chunks_exact(dim).enumerate() {
+            let mut best = (0, f32::INFINITY);
+            for (c, centroid) in near.chunks_exact(dim).enumerate() {
+                let d: f32 = row
+                    .iter()
+                    .zip(centroid)
+                    .map(|(a, b)| (a - b) * (a - b))
+                    .sum();
+                if d < best.1 {
+                    best = (c, d);
+                }
+            }
+            dist[i] = f64::from(best.1);
+            if labels[i] != best.0 {
+                labels[i] = best.0;
                 changed = true;
             }
         }
