@@ -1,9 +1,9 @@
 //! The one JSON error shape of the API, `{"error": {"code", "message"}}`, and the JSON extractor
-//! that uses it for axum's own rejections (malformed JSON, wrong content type, oversize body).
+//! that uses it for every rejection (malformed JSON, wrong content type, oversize body).
 
-use axum::extract::rejection::JsonRejection;
+use axum::body::Bytes;
 use axum::extract::{FromRequest, Request};
-use axum::http::{HeaderValue, StatusCode, header};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -117,32 +117,55 @@ impl From<FitError> for ApiError {
     }
 }
 
-impl From<JsonRejection> for ApiError {
-    fn from(r: JsonRejection) -> Self {
-        match r {
-            JsonRejection::JsonSyntaxError(e) => {
-                Self::new(StatusCode::BAD_REQUEST, "malformed_json", e.body_text())
-            }
-            JsonRejection::JsonDataError(e) => Self::invalid("invalid_request", e.body_text()),
-            JsonRejection::MissingJsonContentType(e) => Self::new(
-                StatusCode::UNSUPPORTED_MEDIA_TYPE,
-                "unsupported_media_type",
-                e.body_text(),
-            ),
-            JsonRejection::BytesRejection(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
-                Self::new(
-                    StatusCode::PAYLOAD_TOO_LARGE,
-                    "body_too_large",
-                    e.body_text(),
-                )
-            }
-            other => Self::new(StatusCode::BAD_REQUEST, "bad_request", other.body_text()),
-        }
-    }
+/// `axum::Json`, but every rejection answers with [`ApiError`]'s JSON shape, and the status
+/// follows what is wrong: 415 for a content type that is not JSON, 413 past the body limit, 400
+/// for a body that is not JSON at all (checked by a syntax-only pass), 422 for JSON of the wrong
+/// shape or with a number beyond f64's range (`1e309` is valid JSON but not a finite value).
+pub struct ApiJson<T>(pub T);
+
+/// `application/json`, or any `application/*+json`, parameters allowed (as axum's `Json`).
+fn is_json(headers: &HeaderMap) -> bool {
+    let Some(value) = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+    else {
+        return false;
+    };
+    let mime = value
+        .split(';')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .to_ascii_lowercase();
+    mime == "application/json" || (mime.starts_with("application/") && mime.ends_with("+json"))
 }
 
-/// `axum::Json`, but every rejection answers with [`ApiError`]'s JSON shape.
-pub struct ApiJson<T>(pub T);
+/// Parses a JSON body into `T`; errors name the path of the offending value.
+pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    let parsed = serde_path_to_error::deserialize(&mut de)
+        .map_err(|e| e.to_string())
+        .and_then(|v| de.end().map(|()| v).map_err(|e| e.to_string()));
+    parsed.map_err(|message| {
+        // Not JSON at all (RFC 8259: UTF-8 text of the JSON grammar): 400. JSON of the wrong
+        // shape: 422.
+        if let Err(e) = std::str::from_utf8(bytes) {
+            return ApiError::new(
+                StatusCode::BAD_REQUEST,
+                "malformed_json",
+                format!("the body is not UTF-8: {e}"),
+            );
+        }
+        if let Err(syntax) = serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
+            return ApiError::new(
+                StatusCode::BAD_REQUEST,
+                "malformed_json",
+                syntax.to_string(),
+            );
+        }
+        ApiError::invalid("invalid_request", message)
+    })
+}
 
 impl<S, T> FromRequest<S> for ApiJson<T>
 where
@@ -152,7 +175,24 @@ where
     type Rejection = ApiError;
 
     async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
-        let axum::Json(value) = axum::Json::<T>::from_request(req, state).await?;
-        Ok(Self(value))
+        if !is_json(req.headers()) {
+            return Err(ApiError::new(
+                StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                "unsupported_media_type",
+                "expected a request with `content-type: application/json`",
+            ));
+        }
+        let bytes = Bytes::from_request(req, state).await.map_err(|e| {
+            if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                ApiError::new(
+                    StatusCode::PAYLOAD_TOO_LARGE,
+                    "body_too_large",
+                    e.body_text(),
+                )
+            } else {
+                ApiError::new(StatusCode::BAD_REQUEST, "bad_request", e.body_text())
+            }
+        })?;
+        parse_json(&bytes).map(Self)
     }
 }

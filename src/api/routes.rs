@@ -5,6 +5,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
+use axum::extract::rejection::PathRejection;
 use axum::extract::{DefaultBodyLimit, MatchedPath, Path, Request, State};
 use axum::http::{HeaderName, HeaderValue, StatusCode, header};
 use axum::middleware::{self, Next};
@@ -33,7 +34,8 @@ pub struct AppState {
     /// False while loading and while draining.
     pub ready: AtomicBool,
     pub limits: Limits,
-    /// Fits admitted (waiting or running); beyond `workers + queue_capacity`, 429.
+    /// Fit requests admitted (body being read, waiting or running); beyond
+    /// `workers + queue_capacity`, 429 before the body is read.
     pub admitted: Arc<Semaphore>,
     /// Fits running at once.
     pub workers: Arc<Semaphore>,
@@ -103,9 +105,12 @@ pub fn router(state: Shared, body_limit: usize) -> Router {
         prefix,
         next: Arc::new(AtomicU64::new(1)),
     };
-    Router::new()
+    let fits = Router::new()
         .route("/v1/fit", post(fit))
         .route("/v1/fit/batch", post(fit_batch))
+        .route_layer(middleware::from_fn_with_state(state.clone(), admit));
+    Router::new()
+        .merge(fits)
         .route("/v1/models", get(list_models))
         .route("/v1/models/{name}", get(get_model))
         .route("/health/live", get(live))
@@ -157,16 +162,32 @@ async fn method_not_allowed() -> ApiError {
     )
 }
 
-/// Admits, queues and runs one validated fit off the async runtime.
+/// Admission for the fit routes, before the body is read: past `workers + queue_capacity`
+/// requests in the house the answer is 429 at once, so a flood of large bodies is neither read
+/// nor parsed, and memory stays bounded by the admitted requests. A request whose client goes
+/// away before its answer is counted as abandoned (a fit still queued is then never run).
+async fn admit(State(state): State<Shared>, req: Request, next: Next) -> Response {
+    let Ok(_permit) = state.admitted.clone().try_acquire_owned() else {
+        return counted(&state, ApiError::overloaded()).into_response();
+    };
+    let t = &state.telemetry;
+    t.queue_depth.inc();
+    let answered = AtomicBool::new(false);
+    let _guard = scopeguard(|| {
+        t.queue_depth.dec();
+        if !answered.load(Ordering::Relaxed) {
+            t.abandoned.inc();
+        }
+    });
+    let response = next.run(req).await;
+    answered.store(true, Ordering::Relaxed);
+    response
+}
+
+/// Waits for a worker and runs one validated fit off the async runtime (the request was
+/// admitted by [`admit`]).
 async fn run_fit(state: &AppState, job: FitJob) -> Result<FitResponse, ApiError> {
     let t = &state.telemetry;
-    let admitted = state
-        .admitted
-        .clone()
-        .try_acquire_owned()
-        .map_err(|_| ApiError::overloaded())?;
-    t.queue_depth.inc();
-    let _depth = scopeguard(|| t.queue_depth.dec());
     let start = Instant::now();
     let work = async {
         let permit = state
@@ -179,7 +200,6 @@ async fn run_fit(state: &AppState, job: FitJob) -> Result<FitResponse, ApiError>
         // If the client goes away while queued, this future is dropped and the fit never runs.
         let handle = tokio::task::spawn_blocking(move || {
             let _permit = permit;
-            let _admitted = admitted;
             let outcome = job.model.fit(&job.points, job.image_size, &job.params);
             (job, outcome)
         });
@@ -274,8 +294,10 @@ async fn list_models(State(state): State<Shared>) -> Result<Json<serde_json::Val
 
 async fn get_model(
     State(state): State<Shared>,
-    Path(name): Path<String>,
+    name: Result<Path<String>, PathRejection>,
 ) -> Result<Json<serde_json::Value>, ApiError> {
+    // A name that is not UTF-8 cannot name a model.
+    let Path(name) = name.map_err(|e| ApiError::not_found(e.body_text()))?;
     let models = state.models()?;
     let model = models
         .get(&name)

@@ -144,11 +144,29 @@ pub async fn serve(
         }
     };
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<Option<RegistryError>>();
+    let (draining_tx, draining_rx) = tokio::sync::oneshot::channel::<()>();
     let server = axum::serve(listener, app).with_graceful_shutdown(async move {
         let outcome = shutdown.await;
+        let _ = draining_tx.send(());
         let _ = stop_tx.send(outcome);
     });
-    server.await?;
+    // In-flight requests get the request timeout (plus a second to write their answer) to
+    // finish; a connection still open after that (a client stalled mid-request) does not keep
+    // the process alive.
+    let deadline = config.request_timeout + Duration::from_secs(1);
+    let drain_limit = async move {
+        if draining_rx.await.is_ok() {
+            tokio::time::sleep(deadline).await;
+        } else {
+            std::future::pending::<()>().await;
+        }
+    };
+    tokio::select! {
+        served = server => served?,
+        () = drain_limit => {
+            tracing::warn!(?deadline, "drain deadline passed; closing the connections still open");
+        }
+    }
     match stop_rx.await {
         Ok(Some(e)) => Err(e.into()),
         _ => {

@@ -39,6 +39,7 @@ pub struct Telemetry {
     pub points: Histogram,
     pub chosen_k: Histogram,
     pub queue_depth: IntGauge,
+    pub abandoned: prometheus::IntCounter,
     pub model_info: IntGaugeVec,
 }
 
@@ -109,7 +110,12 @@ impl Telemetry {
         );
         let queue_depth = IntGauge::new(
             "multifit_queue_depth",
-            "Fits waiting for or running on a worker",
+            "Fit requests admitted and not yet answered (body being read, waiting or running)",
+        )
+        .expect("valid metric");
+        let abandoned = prometheus::IntCounter::new(
+            "multifit_abandoned_total",
+            "Admitted fit requests whose client went away before the answer",
         )
         .expect("valid metric");
         let model_info = IntGaugeVec::new(
@@ -127,6 +133,7 @@ impl Telemetry {
             Box::new(points.clone()),
             Box::new(chosen_k.clone()),
             Box::new(queue_depth.clone()),
+            Box::new(abandoned.clone()),
             Box::new(model_info.clone()),
         ] {
             registry.register(c).expect("unique metric names");
@@ -149,6 +156,7 @@ impl Telemetry {
             points,
             chosen_k,
             queue_depth,
+            abandoned,
             model_info,
         }
     }

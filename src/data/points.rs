@@ -90,7 +90,7 @@ pub enum InputError {
         "a trajectory matrix needs an even number (>= 4) of rows (x and y per frame), got {rows}"
     )]
     BadTrajectoryMatrix { rows: usize },
-    #[error("image_size must be two finite positive numbers, got [{w}, {h}]")]
+    #[error("image_size must be two numbers of pixels between 1 and 1e9, got [{w}, {h}]")]
     BadImageSize { w: f64, h: f64 },
 }
 
@@ -103,7 +103,9 @@ pub struct ImageSize {
 
 impl ImageSize {
     pub fn new(width: f64, height: f64) -> Result<Self, InputError> {
-        if width.is_finite() && height.is_finite() && width > 0.0 && height > 0.0 {
+        // At least a pixel: dividing pixel coordinates by a tinier size overflows the network.
+        let valid = |v: f64| (1.0..=MAX_ABS_COORD).contains(&v);
+        if valid(width) && valid(height) {
             Ok(Self { width, height })
         } else {
             Err(InputError::BadImageSize {
