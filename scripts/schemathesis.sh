@@ -1,0 +1,102 @@
+#!/usr/bin/env bash
+# Property-based API tests: Schemathesis generates requests from openapi.yaml (valid ones and,
+# with every check on, invalid ones) and checks each answer against the spec.
+#
+#   scripts/schemathesis.sh [--max-examples N] [--time-limit S] [--seed N] [--server PATH]
+#                           [-- EXTRA_ST_RUN_ARGS...]
+#
+# Defaults: 50 examples per operation, the whole run stopped after 600 s, seed 0 (reproducible;
+# pass another to explore), target/release/multifit-server (build it first). It starts its own
+# server on an ephemeral 127.0.0.1 port and stops it at the end. Schemathesis comes from $ST when
+# set, else from the venv target/schemathesis-venv, created and filled from PyPI on first use
+# (version pinned below). Reports (JUnit XML, NDJSON events) go to target/schemathesis/.
+#
+# Exit status: Schemathesis's own (0 when every check passed), 124 when the time limit cut the
+# run, 2 on a set-up problem. Without python3 it prints SKIP and exits 0, so CI can call it
+# unconditionally ("run in CI when Python is available").
+set -euo pipefail
+
+root=$(cd "$(dirname "$0")/.." && pwd)
+version=4.32.5
+max_examples=50
+time_limit=600
+seed=0
+server=$root/target/release/multifit-server
+venv=$root/target/schemathesis-venv
+out=$root/target/schemathesis
+extra=()
+while [ $# -gt 0 ]; do
+  case $1 in
+    --max-examples) max_examples=$2; shift 2 ;;
+    --time-limit) time_limit=$2; shift 2 ;;
+    --seed) seed=$2; shift 2 ;;
+    --server) server=$2; shift 2 ;;
+    --) shift; extra=("$@"); break ;;
+    -h|--help) sed -n '2,/^set -euo/{/^set -euo/d;s/^# \{0,1\}//;p}' "$0"; exit 0 ;;
+    *) echo "unknown argument $1 (see --help)" >&2; exit 2 ;;
+  esac
+done
+
+if ! command -v python3 >/dev/null; then
+  echo "SKIP - schemathesis.sh needs python3 (not found); nothing tested"
+  exit 0
+fi
+command -v curl >/dev/null || { echo "schemathesis.sh needs curl" >&2; exit 2; }
+[ -x "$server" ] || { echo "no server binary at $server (cargo build --release)" >&2; exit 2; }
+
+st=${ST:-$venv/bin/st}
+if [ -z "${ST:-}" ] && ! "$st" --version 2>/dev/null | grep -q "$version"; then
+  echo "# installing schemathesis $version into $venv"
+  if ! { [ -x "$venv/bin/pip" ] || python3 -m venv "$venv"; } \
+    || ! "$venv/bin/pip" install --quiet --disable-pip-version-check "schemathesis==$version"; then
+    echo "cannot install schemathesis $version from PyPI (offline?); set ST to an installed st" >&2
+    exit 2
+  fi
+fi
+echo "# $("$st" --version)"
+
+mkdir -p "$out"
+server_pid=
+cleanup() { if [ -n "$server_pid" ]; then kill "$server_pid" 2>/dev/null || true; fi; }
+trap cleanup EXIT
+"$server" --addr 127.0.0.1:0 --models "$root/models" > "$out/server.out" 2> "$out/server.log" &
+server_pid=$!
+base=
+for _ in $(seq 300); do
+  base=$(sed -n 's/^multifit-server listening on \(http:\/\/[^ ]*\)$/\1/p' "$out/server.out")
+  [ -n "$base" ] && break
+  kill -0 "$server_pid" 2>/dev/null || break
+  sleep 0.1
+done
+[ -n "$base" ] || { echo "server did not start; see $out/server.log" >&2; exit 2; }
+for _ in $(seq 600); do
+  [ "$(curl -s -o /dev/null -w '%{http_code}' "$base/health/ready")" = 200 ] && break
+  sleep 0.2
+done
+echo "# server pid $server_pid at $base"
+
+start=$(date +%s)
+set +e
+(cd "$out" && timeout --signal=INT --kill-after=30 "$time_limit" "$st" run "$root/openapi.yaml" \
+  --url "$base" \
+  --checks all \
+  --max-examples "$max_examples" \
+  --seed "$seed" \
+  --request-timeout 60 \
+  --generation-database none \
+  --no-color \
+  --report junit,ndjson --report-dir "$out" \
+  "${extra[@]}")
+status=$?
+set -e
+echo "# schemathesis exit status $status after $(($(date +%s) - start)) s; reports in $out"
+
+kill -TERM "$server_pid" 2>/dev/null || true
+for _ in $(seq 300); do
+  kill -0 "$server_pid" 2>/dev/null || break
+  sleep 0.1
+done
+kill -KILL "$server_pid" 2>/dev/null || true
+wait "$server_pid" 2>/dev/null || true
+server_pid=
+exit "$status"
