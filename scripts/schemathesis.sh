@@ -77,7 +77,7 @@ echo "# server pid $server_pid at $base"
 
 start=$(date +%s)
 set +e
-(cd "$out" && timeout --signal=INT --kill-after=30 "$time_limit" "$st" run "$root/openapi.yaml" \
+(cd "$out" && timeout --signal=INT --kill-after=30 "$time_limit" "$st" --config-file "$root/scripts/schemathesis.toml" run "$root/openapi.yaml" \
   --url "$base" \
   --checks all \
   --max-examples "$max_examples" \
