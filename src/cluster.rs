@@ -336,27 +336,54 @@ pub fn silhouette(p: Points, labels: &[usize], k: usize) -> f64 {
 /// into per-point, per-cluster totals (O(N sum k) memory, never N^2).
 pub fn silhouettes(p: Points, labelings: &[(&[usize], usize)]) -> Vec<f64> {
     let n = p.len();
-    // sums[l][i * k_l + c]: the distances from point i to the points of cluster c of labelling l.
-    let mut sums: Vec<Vec<f64>> = labelings.iter().map(|&(_, k)| vec![0.0; n * k]).collect();
+    // sums[l][i * k_l + c]: the distances from point i to the points of cluster c of labelling l
+    // (f32 partial sums: at most SILHOUETTE_EXACT_MAX distances of at most 2 each).
+    let mut sums: Vec<Vec<f32>> = labelings.iter().map(|&(_, k)| vec![0.0; n * k]).collect();
     let mut dist = vec![0f32; n];
     for i in 0..n {
         let zi = p.row(i);
-        for (j, d) in dist.iter_mut().enumerate().skip(i + 1) {
+        let rest = &mut dist[i + 1..];
+        for (d, zj) in rest
+            .iter_mut()
+            .zip(p.data[(i + 1) * p.dim..].chunks_exact(p.dim))
+        {
             *d = zi
                 .iter()
-                .zip(p.row(j))
+                .zip(zj)
                 .map(|(a, b)| (a - b) * (a - b))
                 .sum::<f32>()
                 .sqrt();
         }
+        let rest = &dist[i + 1..];
         for (&(labels, k), sums) in labelings.iter().zip(&mut sums) {
             let ci = labels[i];
             let (head, tail) = sums.split_at_mut((i + 1) * k);
             let own = &mut head[i * k..];
-            for (j, &d) in dist.iter().enumerate().skip(i + 1) {
-                let d = f64::from(d);
-                own[labels[j]] += d;
-                tail[(j - i - 1) * k + ci] += d;
+            // Four interleaved accumulators: consecutive points often share a cluster, and one
+            // accumulator would chain every add on the previous one.
+            let mut acc = [0f32; 4 * 32];
+            if k <= 32 {
+                let (d4, l4) = (rest.chunks_exact(4), labels[i + 1..].chunks_exact(4));
+                let (d_rem, l_rem) = (d4.remainder(), l4.remainder());
+                for (d, l) in d4.zip(l4) {
+                    acc[l[0]] += d[0];
+                    acc[32 + l[1]] += d[1];
+                    acc[64 + l[2]] += d[2];
+                    acc[96 + l[3]] += d[3];
+                }
+                for (&d, &l) in d_rem.iter().zip(l_rem) {
+                    acc[l] += d;
+                }
+                for (c, o) in own[..k].iter_mut().enumerate() {
+                    *o += acc[c] + acc[32 + c] + acc[64 + c] + acc[96 + c];
+                }
+            } else {
+                for (&d, &lj) in rest.iter().zip(&labels[i + 1..]) {
+                    own[lj] += d;
+                }
+            }
+            for (&d, row) in rest.iter().zip(tail.chunks_exact_mut(k)) {
+                row[ci] += d;
             }
         }
     }
@@ -375,10 +402,10 @@ pub fn silhouettes(p: Points, labelings: &[(&[usize], usize)]) -> Vec<f64> {
                         return 0.0;
                     }
                     let row = &sums[i * k..(i + 1) * k];
-                    let a = row[own] / (counts[own] - 1) as f64;
+                    let a = f64::from(row[own]) / (counts[own] - 1) as f64;
                     let b = (0..k)
                         .filter(|&c| c != own && counts[c] > 0)
-                        .map(|c| row[c] / counts[c] as f64)
+                        .map(|c| f64::from(row[c]) / counts[c] as f64)
                         .fold(f64::INFINITY, f64::min);
                     if b.is_finite() && a.max(b) > 0.0 {
                         (b - a) / a.max(b)
@@ -683,7 +710,10 @@ mod tests {
             .enumerate()
             .map(|(i, &t)| t * 2 + i % 2)
             .collect();
-        let labelings: Vec<(&[usize], usize)> = vec![(&truth, 3), (&shuffled, 4), (&split, 6)];
+        // More than 32 clusters takes the plain accumulation path.
+        let many: Vec<usize> = (0..n).map(|i| i % 40).collect();
+        let labelings: Vec<(&[usize], usize)> =
+            vec![(&truth, 3), (&shuffled, 4), (&split, 6), (&many, 40)];
         let got = silhouettes(p, &labelings);
         for (&(labels, k), s) in labelings.iter().zip(&got) {
             let want = silhouette_reference(p, labels, k);
