@@ -1,4 +1,5 @@
 //! multifit-server: serves the models in `models/` over HTTP/JSON.
+#![forbid(unsafe_code)]
 
 use std::net::SocketAddr;
 use std::path::PathBuf;

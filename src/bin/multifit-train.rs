@@ -1,4 +1,5 @@
 //! multifit-train: data generation, training, evaluation and cross-validation.
+#![forbid(unsafe_code)]
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
