@@ -11,8 +11,9 @@ use multifit::cluster::{ClusterParams, Points, Selection, cluster};
 use multifit::data::{ImageSize, Kind, PointSet, Sequence};
 use multifit::loss::{Loss, one_hot};
 use multifit::model::gemm::matmul;
-use multifit::model::{FusedNet, ModelConfig, Threads, cpu_device};
+use multifit::model::{FusedNet, ModelConfig, cpu_device};
 use multifit::registry::LoadedModel;
+use multifit::threads::Threads;
 use rayon::prelude::*;
 
 fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {

@@ -22,6 +22,8 @@ use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
 
+use crate::threads::Threads;
+
 /// Points above which the silhouette is computed on a seeded sample of this many points.
 pub const SILHOUETTE_EXACT_MAX: usize = 3000;
 
@@ -490,8 +492,18 @@ fn argmax(scores: &[(usize, f64)]) -> Option<usize> {
         .map(|b| b.0)
 }
 
-/// Clusters embeddings, choosing K as `params` says.
+/// Clusters embeddings, choosing K as `params` says, on the calling thread.
 pub fn cluster(p: Points, params: &ClusterParams) -> Result<Clustering, ClusterError> {
+    cluster_on(p, params, &Threads::default())
+}
+
+/// [`cluster`], the k-means of the candidate K run in parallel on `threads` (each K has its own
+/// seeded stream, so the answer does not depend on the threads).
+pub fn cluster_on(
+    p: Points,
+    params: &ClusterParams,
+    threads: &Threads,
+) -> Result<Clustering, ClusterError> {
     let n = p.len();
     let (seed, restarts, iters) = (params.seed, params.restarts, params.max_iter);
     let run = |k: usize| kmeans(p, k, restarts, iters, seed);
@@ -510,7 +522,7 @@ pub fn cluster(p: Points, params: &ClusterParams) -> Result<Clustering, ClusterE
                 Selection::Sod => (k_max + 1).min(n),
                 _ => k_max,
             };
-            let runs: Vec<KMeans> = (1..=top).map(run).collect();
+            let runs: Vec<KMeans> = threads.install(|| threads.map_range(1..=top, run));
             let residuals: Vec<(usize, f64)> = runs
                 .iter()
                 .enumerate()
@@ -630,6 +642,14 @@ mod tests {
         let a = cluster(p, &params(Selection::Sod)).unwrap();
         let b = cluster(p, &params(Selection::Sod)).unwrap();
         assert_eq!(a, b);
+        // The same answer when the K run in parallel.
+        let two = Threads::new(2).unwrap();
+        for sel in [Selection::Sod, Selection::Silhouette, Selection::Fixed(4)] {
+            assert_eq!(
+                cluster_on(p, &params(sel), &two).unwrap(),
+                cluster(p, &params(sel)).unwrap()
+            );
+        }
         // Reversed rows give the same partition (labels compared up to renaming).
         let rev: Vec<f32> = data.chunks(2).rev().flatten().copied().collect();
         let c = cluster(Points::new(&rev, 2).unwrap(), &params(Selection::Sod)).unwrap();

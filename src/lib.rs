@@ -5,7 +5,7 @@
 //! ([`cluster`]) groups the embeddings and picks the number of structures. [`loss`] holds the
 //! training losses, [`data`] inputs, normalisation and datasets, [`metrics`] the evaluation
 //! measures, [`registry`] model directories and the fit pipeline, [`train`] the trainer and
-//! [`api`] the HTTP service.
+//! [`api`] the HTTP service; [`threads`] bounds the threads one fit uses.
 #![forbid(unsafe_code)]
 
 pub mod api;
@@ -15,4 +15,5 @@ pub mod loss;
 pub mod metrics;
 pub mod model;
 pub mod registry;
+pub mod threads;
 pub mod train;

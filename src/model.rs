@@ -22,7 +22,7 @@ use burn::store::{ModuleSnapshot, SafetensorsStore};
 use burn::tensor::activation::relu;
 use serde::{Deserialize, Serialize};
 
-pub use fused::{FusedNet, Threads};
+pub use fused::FusedNet;
 
 /// Architecture of the embedding network; stored in every model card.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -12,7 +12,8 @@ use crate::cluster::{self, ClusterError, ClusterParams, Clustering, Points, Sele
 use crate::data::features::with_neighbors;
 use crate::data::{ImageSize, Kind, Normalization, PointSet};
 use crate::loss::Loss;
-use crate::model::{EmbeddingNet, FusedNet, ModelConfig, ModelError, Threads, cpu_device};
+use crate::model::{EmbeddingNet, FusedNet, ModelConfig, ModelError, cpu_device};
+use crate::threads::Threads;
 
 /// File names inside a model directory.
 pub const CARD_FILE: &str = "model.json";
@@ -153,7 +154,7 @@ pub struct LoadedModel {
     pub card: ModelCard,
     pub net: EmbeddingNet,
     fused: FusedNet,
-    /// Threads one fit's forward pass may use.
+    /// Threads one fit may use.
     threads: Threads,
     device: Device,
 }
@@ -214,14 +215,15 @@ impl LoadedModel {
         })
     }
 
-    /// Gives each fit's forward pass `threads` threads of a pool of this model's own: a server
+    /// Gives each fit (forward pass and k-means) `threads` threads of a pool of this model's own: a server
     /// running W fits at once on C cores gives each C / W, so threads are never oversubscribed.
     pub fn with_threads(mut self, threads: usize) -> Result<Self, ModelError> {
-        self.threads = Threads::new(threads)?;
+        self.threads = Threads::new(threads)
+            .map_err(|e| ModelError::Config(format!("cannot start {threads} threads: {e}")))?;
         Ok(self)
     }
 
-    /// Threads one fit's forward pass may use.
+    /// Threads one fit may use.
     pub fn threads(&self) -> usize {
         self.threads.count()
     }
@@ -284,7 +286,7 @@ impl LoadedModel {
         let embeddings = self.embed(&input);
         let t1 = Instant::now();
         let e = self.card.architecture.embed_dim;
-        let clustering = cluster::cluster(Points::new(&embeddings, e)?, params)?;
+        let clustering = cluster::cluster_on(Points::new(&embeddings, e)?, params, &self.threads)?;
         let t2 = Instant::now();
         Ok(FitOutcome {
             clustering,

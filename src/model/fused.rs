@@ -14,14 +14,12 @@
 //! and the same bits whatever the number of threads. Context norm needs the whole set's moments,
 //! so that merge is the only point where tiles wait for each other.
 
-use std::sync::Arc;
-
 use burn::nn::{BatchNorm, Linear};
 use burn::prelude::*;
-use rayon::prelude::*;
 
 use super::gemm::matmul;
 use super::{EmbeddingNet, ModelError};
+use crate::threads::Threads;
 
 /// Rows per tile: large enough that a tile's matrix multiply amortises packing the weights,
 /// small enough that the tile stays in L2 cache (256 x 128 floats = 128 KiB).
@@ -214,62 +212,17 @@ fn residual_scale_relu(x: &mut [f32], h: &[f32], a: &[f32], c: &[f32]) {
     }
 }
 
-/// Where a forward pass runs: on the calling thread, or with its tiles spread over a rayon pool
-/// of its own (so a fit never uses more threads than it was given).
-#[derive(Debug, Clone, Default)]
-pub struct Threads(Option<Arc<rayon::ThreadPool>>);
-
-impl Threads {
-    /// `count` threads (1: the calling thread only).
-    pub fn new(count: usize) -> Result<Self, ModelError> {
-        if count <= 1 {
-            return Ok(Self(None));
-        }
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(count)
-            .thread_name(|i| format!("multifit-forward-{i}"))
-            .build()
-            .map(|pool| Self(Some(Arc::new(pool))))
-            .map_err(|e| ModelError::Config(format!("cannot start {count} threads: {e}")))
-    }
-
-    pub fn count(&self) -> usize {
-        self.0.as_ref().map_or(1, |p| p.current_num_threads())
-    }
-
-    /// Runs `f` on this pool (the tiles' parallel loops inside it then stay on the pool's
-    /// threads, with no hand-over to and from the calling thread per layer), or on the caller.
-    fn install<T: Send>(&self, f: impl FnOnce() -> T + Send) -> T {
-        match &self.0 {
-            None => f(),
-            Some(pool) => pool.install(f),
-        }
-    }
-
-    /// `f` over every tile, results in tile order. Call inside [`Threads::install`].
-    fn map<T: Send>(
-        &self,
-        tiles: &mut [Tile<'_>],
-        f: impl Fn(&mut Tile<'_>) -> T + Sync + Send,
-    ) -> Vec<T> {
-        match &self.0 {
-            None => tiles.iter_mut().map(f).collect(),
-            Some(_) => tiles.par_iter_mut().map(&f).collect(),
-        }
-    }
-
-    /// `f` over every tile, its moments merged in tile order.
-    fn moments(
-        &self,
-        tiles: &mut [Tile<'_>],
-        f: impl Fn(&mut Tile<'_>) -> Moments + Sync + Send,
-    ) -> Moments {
-        let parts = self.map(tiles, f);
-        parts
-            .into_iter()
-            .reduce(Moments::merge)
-            .expect("at least one tile")
-    }
+/// `f` over every tile (in parallel on `threads`), the tiles' moments merged in tile order.
+fn tile_moments(
+    threads: &Threads,
+    tiles: &mut [Tile<'_>],
+    f: impl Fn(&mut Tile<'_>) -> Moments + Sync + Send,
+) -> Moments {
+    let parts = threads.map(tiles, f);
+    parts
+        .into_iter()
+        .reduce(Moments::merge)
+        .expect("at least one tile")
 }
 
 /// A tile's rows of every buffer of the forward pass.
@@ -353,7 +306,7 @@ impl FusedNet {
             .collect();
         // Input layer, then the first block's first multiply.
         let first = self.blocks.first();
-        let mut moments = threads.moments(&mut tiles, |t| {
+        let mut moments = tile_moments(threads, &mut tiles, |t| {
             self.input.forward(t.points, t.x);
             match first {
                 Some(b) => {
@@ -365,14 +318,14 @@ impl FusedNet {
         });
         for (i, block) in self.blocks.iter().enumerate() {
             let (a, c) = moments.coefficients(eps, block.bn1.as_ref());
-            moments = threads.moments(&mut tiles, |t| {
+            moments = tile_moments(threads, &mut tiles, |t| {
                 scale_relu(t.h, &a, &c);
                 block.l2.forward(t.h, t.h2);
                 Moments::of(t.h2, w)
             });
             let (a, c) = moments.coefficients(eps, block.bn2.as_ref());
             let next = self.blocks.get(i + 1);
-            moments = threads.moments(&mut tiles, |t| {
+            moments = tile_moments(threads, &mut tiles, |t| {
                 residual_scale_relu(t.x, t.h2, &a, &c);
                 match next {
                     Some(b) => {
