@@ -267,7 +267,9 @@ impl Normalization {
                 None => bounding_frame(points.values()),
             },
         };
-        let inv = if scale > 0.0 { 1.0 / scale } else { 1.0 };
+        // A set of (nearly) coincident points has no scale: a zero or subnormal spread, whose
+        // inverse would overflow, leaves the values unscaled.
+        let inv = if scale >= f64::MIN_POSITIVE { 1.0 / scale } else { 1.0 };
         points
             .values()
             .chunks_exact(2)
@@ -382,6 +384,17 @@ mod tests {
         let want = [-s, -s, s, -s, s, s, -s, s];
         for (a, b) in z.iter().zip(want) {
             assert!((a - b).abs() < 1e-6, "{z:?}");
+        }
+    }
+
+    #[test]
+    fn subnormal_spread_gives_finite_values() {
+        // Found by fuzzing: a bounding box of half-side 5e-324 once gave 1 / scale = inf.
+        let rows = vec![vec![0.0, 0.0, 0.0, 0.0], vec![1e-323, 0.0, 0.0, 0.0], vec![0.0; 4]];
+        let set = PointSet::from_rows(Kind::Correspondences, &rows).unwrap();
+        for norm in [Normalization::ImageFrame, Normalization::CentroidUnitRms] {
+            let z = norm.apply(&set, None);
+            assert!(z.iter().all(|v| v.is_finite()), "{norm:?}: {z:?}");
         }
     }
 
