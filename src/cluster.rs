@@ -423,10 +423,21 @@ pub fn silhouettes(p: Points, labelings: &[(&[usize], usize)]) -> Vec<f64> {
 
 /// The silhouettes of several labellings `(labels, k)`, on one seeded sample of
 /// [`SILHOUETTE_EXACT_MAX`] points when the set is larger.
-fn silhouette_scores(p: Points, labelings: &[(&[usize], usize)], seed: u64) -> Vec<f64> {
+/// With several threads, the labellings are split into one group per thread (each group pays
+/// for the pairwise distances once).
+fn silhouette_scores(
+    p: Points,
+    labelings: &[(&[usize], usize)],
+    seed: u64,
+    threads: &Threads,
+) -> Vec<f64> {
     let n = p.len();
     if n <= SILHOUETTE_EXACT_MAX {
-        return silhouettes(p, labelings);
+        let groups = threads.count().min(labelings.len()).max(1);
+        let per = labelings.len().div_ceil(groups);
+        let mut chunks: Vec<&[(&[usize], usize)]> = labelings.chunks(per.max(1)).collect();
+        let scores = threads.install(|| threads.map(&mut chunks, |group| silhouettes(p, group)));
+        return scores.concat();
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5151);
     let mut idx: Vec<usize> = (0..n).collect();
@@ -445,13 +456,11 @@ fn silhouette_scores(p: Points, labelings: &[(&[usize], usize)], seed: u64) -> V
         .zip(labelings)
         .map(|(l, &(_, k))| (l.as_slice(), k))
         .collect();
-    silhouettes(
-        Points {
-            data: &data,
-            dim: p.dim,
-        },
-        &sub,
-    )
+    let sample = Points {
+        data: &data,
+        dim: p.dim,
+    };
+    silhouette_scores(sample, &sub, seed, threads)
 }
 
 /// Relabels clusters by first appearance in input order, so equal partitions give equal labels.
@@ -538,7 +547,7 @@ pub fn cluster_on(
                         .map(|k| (runs[k - 1].labels.as_slice(), k))
                         .collect();
                     (2..=k_max)
-                        .zip(silhouette_scores(p, &labelings, seed))
+                        .zip(silhouette_scores(p, &labelings, seed, threads))
                         .collect()
                 }
             };
