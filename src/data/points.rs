@@ -269,7 +269,11 @@ impl Normalization {
         };
         // A set of (nearly) coincident points has no scale: a zero or subnormal spread, whose
         // inverse would overflow, leaves the values unscaled.
-        let inv = if scale >= f64::MIN_POSITIVE { 1.0 / scale } else { 1.0 };
+        let inv = if scale >= f64::MIN_POSITIVE {
+            1.0 / scale
+        } else {
+            1.0
+        };
         points
             .values()
             .chunks_exact(2)
@@ -390,7 +394,11 @@ mod tests {
     #[test]
     fn subnormal_spread_gives_finite_values() {
         // Found by fuzzing: a bounding box of half-side 5e-324 once gave 1 / scale = inf.
-        let rows = vec![vec![0.0, 0.0, 0.0, 0.0], vec![1e-323, 0.0, 0.0, 0.0], vec![0.0; 4]];
+        let rows = vec![
+            vec![0.0, 0.0, 0.0, 0.0],
+            vec![1e-323, 0.0, 0.0, 0.0],
+            vec![0.0; 4],
+        ];
         let set = PointSet::from_rows(Kind::Correspondences, &rows).unwrap();
         for norm in [Normalization::ImageFrame, Normalization::CentroidUnitRms] {
             let z = norm.apply(&set, None);
