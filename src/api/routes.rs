@@ -108,7 +108,10 @@ pub fn router(state: Shared, body_limit: usize) -> Router {
     let fits = Router::new()
         .route("/v1/fit", post(fit))
         .route("/v1/fit/batch", post(fit_batch))
-        .route_layer(middleware::from_fn_with_state(state.clone(), admit));
+        .route_layer(middleware::from_fn_with_state(
+            (state.clone(), body_limit),
+            admit,
+        ));
     Router::new()
         .merge(fits)
         .route("/v1/models", get(list_models))
@@ -162,12 +165,18 @@ async fn method_not_allowed() -> ApiError {
     )
 }
 
-/// Admission for the fit routes, before the body is read: past `workers + queue_capacity`
-/// requests in the house the answer is 429 at once, so a flood of large bodies is neither read
-/// nor parsed, and memory stays bounded by the admitted requests. A request whose client goes
-/// away before its answer is counted as abandoned (a fit still queued is then never run).
-async fn admit(State(state): State<Shared>, req: Request, next: Next) -> Response {
+/// Admission for the fit routes, before the body is parsed: past `workers + queue_capacity`
+/// requests in the house the answer is 429 at once, its body read and dropped unparsed (so the
+/// connection stays usable and the answer arrives), so a flood of large bodies costs neither
+/// parsing nor memory. A request whose client goes away before its answer is counted as
+/// abandoned (a fit still queued is then never run).
+async fn admit(
+    State((state, body_limit)): State<(Shared, usize)>,
+    req: Request,
+    next: Next,
+) -> Response {
     let Ok(_permit) = state.admitted.clone().try_acquire_owned() else {
+        discard_body(req.into_body(), body_limit, state.timeout).await;
         return counted(&state, ApiError::overloaded()).into_response();
     };
     let t = &state.telemetry;
@@ -182,6 +191,24 @@ async fn admit(State(state): State<Shared>, req: Request, next: Next) -> Respons
     let response = next.run(req).await;
     answered.store(true, Ordering::Relaxed);
     response
+}
+
+/// Reads and drops a body of up to `limit` bytes (nothing is buffered or parsed), so that an
+/// early answer leaves the connection in step and reaches the client: closing a connection with
+/// unread request data can reset it and lose the answer.
+async fn discard_body(body: axum::body::Body, limit: usize, timeout: Duration) {
+    use http_body_util::BodyExt;
+    let drain = async {
+        let mut body = body;
+        let mut seen = 0usize;
+        while let Some(Ok(frame)) = body.frame().await {
+            seen += frame.data_ref().map_or(0, |d| d.len());
+            if seen > limit {
+                break;
+            }
+        }
+    };
+    let _ = tokio::time::timeout(timeout, drain).await;
 }
 
 /// Waits for a worker and runs one validated fit off the async runtime (the request was
