@@ -36,7 +36,8 @@ done
 [ -x "$server" ] || { echo "no server binary at $server (cargo build --release)" >&2; exit 2; }
 
 tmp=$(mktemp -d)
-server_pid=
+# shellcheck source=scripts/lib/server.sh
+source "$root/scripts/lib/server.sh"
 cleanup() {
   if [ -n "$server_pid" ]; then kill "$server_pid" 2>/dev/null || true; fi
   rm -rf "$tmp"
@@ -45,20 +46,8 @@ trap cleanup EXIT
 python3 "$root/scripts/loadtest-body.py" 20000 "$tmp/slow.json"
 python3 "$root/scripts/loadtest-body.py" 1000 "$tmp/small.json"
 
-"$server" --addr 127.0.0.1:0 --models "$root/models" --workers "$workers" --queue-capacity 32 \
-  > "$tmp/server.out" 2> "$tmp/server.log" &
-server_pid=$!
-base=
-for _ in $(seq 300); do
-  base=$(sed -n 's/^multifit-server listening on \(http:\/\/[^ ]*\)$/\1/p' "$tmp/server.out")
-  [ -n "$base" ] && break
-  sleep 0.1
-done
-[ -n "$base" ] || { echo "server did not start" >&2; cat "$tmp/server.log" >&2; exit 2; }
-for _ in $(seq 600); do
-  [ "$(curl -s -o /dev/null -w '%{http_code}' "$base/health/ready")" = 200 ] && break
-  sleep 0.2
-done
+start_server "$tmp" "$server" --addr 127.0.0.1:0 --models "$root/models" --workers "$workers" \
+  --queue-capacity 32
 
 # fit BODY [CURL_ARGS...]: prints "status seconds".
 fit() {
@@ -177,7 +166,5 @@ else
 fi
 echo "  fits given a worker in round C: $(($(started) - started0)) (the abandoned ones and the probe)"
 
-kill -TERM "$server_pid" 2>/dev/null || true
-wait "$server_pid" 2>/dev/null || true
-server_pid=
+stop_server
 exit "$status"

@@ -62,7 +62,8 @@ done
 [ -f "$data/$dataset" ] || { echo "missing $data/$dataset (set MULTIFIT_DATA)" >&2; exit 2; }
 mkdir -p "$out"
 
-server_pid=
+# shellcheck source=scripts/lib/server.sh
+source "$root/scripts/lib/server.sh"
 sampler_pid=
 cleanup() {
   if [ -n "$sampler_pid" ]; then kill "$sampler_pid" 2>/dev/null || true; fi
@@ -73,38 +74,11 @@ trap cleanup EXIT
 # make_body N FILE: the /v1/fit body of N correspondences.
 make_body() { MULTIFIT_DATA=$data python3 "$root/scripts/loadtest-body.py" "$1" "$2" "$data/$dataset"; }
 
-# start_server LOG_DIR: starts the server, sets $server_pid and $base once /health/ready is 200.
-start_server() {
-  local dir=$1 args=(--addr "127.0.0.1:$port" --models "$root/models" --queue-capacity "$queue")
+# run_server LOG_DIR: this run's server; sets $server_pid and $base once it is ready.
+run_server() {
+  local args=(--addr "127.0.0.1:$port" --models "$root/models" --queue-capacity "$queue")
   [ -n "$workers" ] && args+=(--workers "$workers")
-  "$server" "${args[@]}" > "$dir/server.out" 2> "$dir/server.log" &
-  server_pid=$!
-  base=
-  for _ in $(seq 300); do
-    base=$(sed -n 's/^multifit-server listening on \(http:\/\/[^ ]*\)$/\1/p' "$dir/server.out")
-    [ -n "$base" ] && break
-    kill -0 "$server_pid" 2>/dev/null || break
-    sleep 0.1
-  done
-  [ -n "$base" ] || { echo "server did not start; see $dir/server.log" >&2; exit 2; }
-  for _ in $(seq 600); do
-    [ "$(curl -s -o /dev/null -w '%{http_code}' "$base/health/ready")" = 200 ] && return 0
-    kill -0 "$server_pid" 2>/dev/null || break
-    sleep 0.2
-  done
-  echo "server at $base never became ready; see $dir/server.log" >&2
-  exit 2
-}
-
-stop_server() {
-  kill -TERM "$server_pid" 2>/dev/null || true
-  for _ in $(seq 300); do
-    kill -0 "$server_pid" 2>/dev/null || break
-    sleep 0.1
-  done
-  kill -KILL "$server_pid" 2>/dev/null || true
-  wait "$server_pid" 2>/dev/null || true
-  server_pid=
+  start_server "$1" "$server" "${args[@]}"
 }
 
 # queue_depth: the multifit_queue_depth gauge now.
@@ -123,7 +97,7 @@ for n in "${phases[@]}"; do
   make_body "$n" "$body"
   echo "# phase N = $n: body $(wc -c < "$body") bytes, $connections connections, ${duration} s," \
     "queue capacity $queue, workers ${workers:-default}"
-  start_server "$dir"
+  run_server "$dir"
   echo "# server pid $server_pid at $base"
 
   # One request alone: the body must be accepted, and it gives the unloaded latency.

@@ -56,23 +56,11 @@ fi
 echo "# $("$st" --version)"
 
 mkdir -p "$out"
-server_pid=
+# shellcheck source=scripts/lib/server.sh
+source "$root/scripts/lib/server.sh"
 cleanup() { if [ -n "$server_pid" ]; then kill "$server_pid" 2>/dev/null || true; fi; }
 trap cleanup EXIT
-"$server" --addr 127.0.0.1:0 --models "$root/models" > "$out/server.out" 2> "$out/server.log" &
-server_pid=$!
-base=
-for _ in $(seq 300); do
-  base=$(sed -n 's/^multifit-server listening on \(http:\/\/[^ ]*\)$/\1/p' "$out/server.out")
-  [ -n "$base" ] && break
-  kill -0 "$server_pid" 2>/dev/null || break
-  sleep 0.1
-done
-[ -n "$base" ] || { echo "server did not start; see $out/server.log" >&2; exit 2; }
-for _ in $(seq 600); do
-  [ "$(curl -s -o /dev/null -w '%{http_code}' "$base/health/ready")" = 200 ] && break
-  sleep 0.2
-done
+start_server "$out" "$server" --addr 127.0.0.1:0 --models "$root/models"
 echo "# server pid $server_pid at $base"
 
 start=$(date +%s)
@@ -91,12 +79,5 @@ status=$?
 set -e
 echo "# schemathesis exit status $status after $(($(date +%s) - start)) s; reports in $out"
 
-kill -TERM "$server_pid" 2>/dev/null || true
-for _ in $(seq 300); do
-  kill -0 "$server_pid" 2>/dev/null || break
-  sleep 0.1
-done
-kill -KILL "$server_pid" 2>/dev/null || true
-wait "$server_pid" 2>/dev/null || true
-server_pid=
+stop_server
 exit "$status"

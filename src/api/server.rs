@@ -31,8 +31,8 @@ pub struct ServerConfig {
     pub queue_capacity: usize,
     pub request_timeout: Duration,
     pub workers: usize,
-    /// Threads one fit may use (matrix multiplies); `workers * fit_threads` should not exceed
-    /// the cores.
+    /// Threads one fit may use (forward pass, k-means, silhouettes); `workers * fit_threads`
+    /// should not exceed the cores.
     pub fit_threads: usize,
     pub log_format: LogFormat,
 }
