@@ -51,6 +51,7 @@ fn main() {
         batch_norm: false,
         cn_epsilon: 1e-3,
         neighbors: 0,
+        graph_neighbors: 0,
     };
     let net = cfg.init(&device).expect("config");
     let fused = FusedNet::from_net(&net).expect("fused weights");

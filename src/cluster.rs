@@ -208,21 +208,25 @@ fn stream_seed(seed: u64, k: usize) -> u64 {
     seed ^ (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
 }
 
+/// Squared distance in f32, the embeddings' own precision (sums and residuals stay in f64).
+fn sq_dist32(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
+}
+
 /// k-means++ seeding: [k, dim] centroids.
 fn kmeans_pp(p: Points, k: usize, rng: &mut ChaCha8Rng) -> Vec<f64> {
     let n = p.len();
     let mut centroids: Vec<f64> = Vec::with_capacity(k * p.dim);
     let first = rng.random_range(0..n);
     centroids.extend(p.row(first).iter().map(|&v| v as f64));
-    let mut d2: Vec<f64> = (0..n)
-        .map(|i| sq_dist(p.row(i), &centroids[..p.dim]))
-        .collect();
-    for c in 1..k {
-        let total: f64 = d2.iter().sum();
+    let mut d2: Vec<f32> = (0..n).map(|i| sq_dist32(p.row(i), p.row(first))).collect();
+    for _ in 1..k {
+        let total: f64 = d2.iter().map(|&d| f64::from(d)).sum();
         let pick = if total > 0.0 {
             let mut target = rng.random_range(0.0..total);
             let mut pick = n - 1;
             for (i, &d) in d2.iter().enumerate() {
+                let d = f64::from(d);
                 if target < d {
                     pick = i;
                     break;
@@ -234,73 +238,133 @@ fn kmeans_pp(p: Points, k: usize, rng: &mut ChaCha8Rng) -> Vec<f64> {
             rng.random_range(0..n)
         };
         centroids.extend(p.row(pick).iter().map(|&v| v as f64));
-        let new = &centroids[c * p.dim..(c + 1) * p.dim];
+        let new = p.row(pick);
         for (i, d) in d2.iter_mut().enumerate() {
-            *d = d.min(sq_dist(p.row(i), new));
+            *d = d.min(sq_dist32(p.row(i), new));
         }
     }
     centroids
 }
 
 /// Lloyd iterations from the given centroids until assignments stop changing.
+///
+/// Hamerly's bounds skip most distance computations once the clusters settle, without changing
+/// what Lloyd computes: every point keeps an upper bound on the distance to its own centroid and
+/// a lower bound on the distance to any other; when the upper bound is below both the lower bound
+/// and half the distance from its centroid to the nearest other centroid, its nearest centroid
+/// cannot have changed. The bounds follow the centroids' moves. Centroid sums are updated only
+/// for the points that change cluster.
 fn lloyd(p: Points, k: usize, mut centroids: Vec<f64>, max_iter: usize) -> KMeans {
     let (n, dim) = (p.len(), p.dim);
     let mut labels = vec![usize::MAX; n];
-    let mut dist = vec![0f64; n];
+    // upper[i] >= |z_i - own centroid|, lower[i] <= |z_i - any other centroid|.
+    let mut upper = vec![f32::INFINITY; n];
+    let mut lower = vec![0f32; n];
     let mut near = vec![0f32; k * dim];
+    let mut half = vec![0f32; k];
+    let mut sums = vec![0f64; k * dim];
+    let mut counts = vec![0usize; k];
+    let add = |sums: &mut [f64], c: usize, row: &[f32], sign: f64| {
+        for (s, &v) in sums[c * dim..(c + 1) * dim].iter_mut().zip(row) {
+            *s += sign * f64::from(v);
+        }
+    };
     for _ in 0..max_iter {
-        let mut changed = false;
-        // Assignment in f32 (the embeddings' own precision); sums and residuals in f64.
         near.iter_mut()
             .zip(&centroids)
             .for_each(|(f, &c)| *f = c as f32);
+        for c in 0..k {
+            half[c] = (0..k)
+                .filter(|&o| o != c)
+                .map(|o| sq_dist32(&near[c * dim..(c + 1) * dim], &near[o * dim..(o + 1) * dim]))
+                .fold(f32::INFINITY, f32::min)
+                .sqrt()
+                * 0.5;
+        }
+        let mut changed = false;
         for (i, row) in p.data.chunks_exact(dim).enumerate() {
-            let mut best = (0, f32::INFINITY);
-            for (c, centroid) in near.chunks_exact(dim).enumerate() {
-                let d: f32 = row
-                    .iter()
-                    .zip(centroid)
-                    .map(|(a, b)| (a - b) * (a - b))
-                    .sum();
-                if d < best.1 {
-                    best = (c, d);
+            let own = labels[i];
+            if own != usize::MAX {
+                let bound = half[own].max(lower[i]);
+                if upper[i] <= bound {
+                    continue;
+                }
+                upper[i] = sq_dist32(row, &near[own * dim..(own + 1) * dim]).sqrt();
+                if upper[i] <= bound {
+                    continue;
                 }
             }
-            dist[i] = f64::from(best.1);
-            if labels[i] != best.0 {
-                labels[i] = best.0;
+            let (mut best, mut d1, mut d2) = (0, f32::INFINITY, f32::INFINITY);
+            for (c, centroid) in near.chunks_exact(dim).enumerate() {
+                let d = sq_dist32(row, centroid);
+                if d < d1 {
+                    (best, d2, d1) = (c, d1, d);
+                } else if d < d2 {
+                    d2 = d;
+                }
+            }
+            upper[i] = d1.sqrt();
+            lower[i] = d2.sqrt();
+            if own != best {
+                if own != usize::MAX {
+                    add(&mut sums, own, row, -1.0);
+                    counts[own] -= 1;
+                }
+                add(&mut sums, best, row, 1.0);
+                counts[best] += 1;
+                labels[i] = best;
                 changed = true;
             }
         }
         if !changed {
             break;
         }
-        let mut sums = vec![0f64; k * dim];
-        let mut counts = vec![0usize; k];
-        for i in 0..n {
-            counts[labels[i]] += 1;
-            for (s, &v) in sums[labels[i] * dim..].iter_mut().zip(p.row(i)) {
-                *s += v as f64;
-            }
-        }
         for c in 0..k {
             if counts[c] == 0 {
                 // An empty cluster takes the point farthest from its centroid.
                 let far = (0..n)
-                    .max_by(|&a, &b| dist[a].total_cmp(&dist[b]))
-                    .unwrap_or(0);
-                dist[far] = 0.0;
-                labels[far] = c;
-                for (s, &v) in sums[c * dim..(c + 1) * dim].iter_mut().zip(p.row(far)) {
-                    *s = v as f64;
-                }
+                    .filter(|&i| counts[labels[i]] > 1)
+                    .map(|i| {
+                        let l = labels[i];
+                        (i, sq_dist32(p.row(i), &near[l * dim..(l + 1) * dim]))
+                    })
+                    .max_by(|a, b| a.1.total_cmp(&b.1))
+                    .map_or(0, |(i, _)| i);
+                let from = labels[far];
+                add(&mut sums, from, p.row(far), -1.0);
+                counts[from] -= 1;
+                add(&mut sums, c, p.row(far), 1.0);
                 counts[c] = 1;
-            }
-            for s in &mut sums[c * dim..(c + 1) * dim] {
-                *s /= counts[c] as f64;
+                labels[far] = c;
+                (upper[far], lower[far]) = (0.0, 0.0);
             }
         }
-        centroids = sums;
+        // New centroids, and how far each moved: the bounds widen by that much.
+        let mut moved = vec![0f32; k];
+        for c in 0..k {
+            let mean = &mut centroids[c * dim..(c + 1) * dim];
+            let mut shift = 0f64;
+            for (m, s) in mean.iter_mut().zip(&sums[c * dim..(c + 1) * dim]) {
+                let v = s / counts[c] as f64;
+                shift += (v - *m) * (v - *m);
+                *m = v;
+            }
+            // Rounded up so that f32 bounds stay bounds.
+            moved[c] = (shift.sqrt() * (1.0 + 1e-6) + 1e-7) as f32;
+        }
+        let (mut far1, mut m1, mut m2) = (0, 0f32, 0f32);
+        for (c, &m) in moved.iter().enumerate() {
+            if m > m1 {
+                (far1, m2, m1) = (c, m1, m);
+            } else if m > m2 {
+                m2 = m;
+            }
+        }
+        for i in 0..n {
+            let l = labels[i];
+            upper[i] += moved[l];
+            lower[i] -= if l == far1 { m2 } else { m1 };
+        }
     }
     let residual = (0..n)
         .map(|i| sq_dist(p.row(i), &centroids[labels[i] * dim..(labels[i] + 1) * dim]))
@@ -333,66 +397,93 @@ pub fn silhouette(p: Points, labels: &[usize], k: usize) -> f64 {
     silhouettes(p, &[(labels, k)])[0]
 }
 
-/// The mean silhouette of several labellings `(labels, k)` of the same rows, exact. Every
-/// pairwise distance is computed once (O(N^2 dim) time for all labellings together) and summed
-/// into per-point, per-cluster totals (O(N sum k) memory, never N^2).
-pub fn silhouettes(p: Points, labelings: &[(&[usize], usize)]) -> Vec<f64> {
-    let n = p.len();
-    // sums[l][i * k_l + c]: the distances from point i to the points of cluster c of labelling l
-    // (f32 partial sums: at most SILHOUETTE_EXACT_MAX distances of at most 2 each).
-    let mut sums: Vec<Vec<f32>> = labelings.iter().map(|&(_, k)| vec![0.0; n * k]).collect();
-    let mut dist = vec![0f32; n];
-    for i in 0..n {
-        let zi = p.row(i);
-        let rest = &mut dist[i + 1..];
-        for (d, zj) in rest
-            .iter_mut()
-            .zip(p.data[(i + 1) * p.dim..].chunks_exact(p.dim))
-        {
-            *d = zi
-                .iter()
-                .zip(zj)
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum::<f32>()
-                .sqrt();
+/// Rows of one block of the silhouette: distances from every point to these rows are computed
+/// together, one SIMD lane per row.
+const SIL_BLOCK: usize = 16;
+
+/// For the rows `rows` (a range starting at a multiple of [`SIL_BLOCK`]), the sums of distances
+/// from each row to the points of each cluster of every labelling: -> per labelling
+/// `[rows.len(), k]`.
+///
+/// Distances are computed for a block of 16 rows against every point at once (the block held
+/// transposed, so the inner loops run over 16 lanes), then added into per-cluster accumulators of
+/// 16 lanes: no scattered single adds. The sums of a row do not depend on which block or thread
+/// computed them.
+fn cluster_distance_sums(
+    p: Points,
+    labelings: &[(&[usize], usize)],
+    rows: std::ops::Range<usize>,
+) -> Vec<Vec<f32>> {
+    const R: usize = SIL_BLOCK;
+    let (n, dim) = (p.len(), p.dim);
+    let mut out: Vec<Vec<f32>> = labelings
+        .iter()
+        .map(|&(_, k)| vec![0.0; rows.len() * k])
+        .collect();
+    let mut block = vec![[0f32; R]; dim];
+    let mut dist = vec![[0f32; R]; n];
+    let mut acc: Vec<[f32; R]> = Vec::new();
+    for start in rows.clone().step_by(R) {
+        let live = R.min(rows.end - start);
+        for (e, lanes) in block.iter_mut().enumerate() {
+            for (r, v) in lanes.iter_mut().enumerate() {
+                *v = p.row(start + r.min(live - 1))[e];
+            }
         }
-        let rest = &dist[i + 1..];
-        for (&(labels, k), sums) in labelings.iter().zip(&mut sums) {
-            let ci = labels[i];
-            let (head, tail) = sums.split_at_mut((i + 1) * k);
-            let own = &mut head[i * k..];
-            // Four interleaved accumulators: consecutive points often share a cluster, and one
-            // accumulator would chain every add on the previous one.
-            let mut acc = [0f32; 4 * 32];
-            if k <= 32 {
-                let (d4, l4) = (rest.chunks_exact(4), labels[i + 1..].chunks_exact(4));
-                let (d_rem, l_rem) = (d4.remainder(), l4.remainder());
-                for (d, l) in d4.zip(l4) {
-                    acc[l[0]] += d[0];
-                    acc[32 + l[1]] += d[1];
-                    acc[64 + l[2]] += d[2];
-                    acc[96 + l[3]] += d[3];
-                }
-                for (&d, &l) in d_rem.iter().zip(l_rem) {
-                    acc[l] += d;
-                }
-                for (c, o) in own[..k].iter_mut().enumerate() {
-                    *o += acc[c] + acc[32 + c] + acc[64 + c] + acc[96 + c];
-                }
-            } else {
-                for (&d, &lj) in rest.iter().zip(&labels[i + 1..]) {
-                    own[lj] += d;
+        for (d, zj) in dist.iter_mut().zip(p.data.chunks_exact(dim)) {
+            let mut sq = [0f32; R];
+            for (lanes, &v) in block.iter().zip(zj) {
+                for (s, &b) in sq.iter_mut().zip(lanes) {
+                    *s += (b - v) * (b - v);
                 }
             }
-            for (&d, row) in rest.iter().zip(tail.chunks_exact_mut(k)) {
-                row[ci] += d;
+            for (o, s) in d.iter_mut().zip(&sq) {
+                *o = s.sqrt();
+            }
+        }
+        for (&(labels, k), out) in labelings.iter().zip(&mut out) {
+            acc.clear();
+            acc.resize(k, [0f32; R]);
+            for (d, &l) in dist.iter().zip(labels) {
+                for (a, &v) in acc[l].iter_mut().zip(d) {
+                    *a += v;
+                }
+            }
+            for r in 0..live {
+                let row = &mut out[(start - rows.start + r) * k..][..k];
+                for (o, a) in row.iter_mut().zip(&acc) {
+                    *o = a[r];
+                }
             }
         }
     }
+    out
+}
+
+/// The mean silhouette of several labellings `(labels, k)` of the same rows, exact. All pairwise
+/// distances are computed once for all labellings (O(N^2 dim) time) and summed into per-point,
+/// per-cluster totals (O(N sum k) memory, never N^2); the rows are split over `threads`.
+pub fn silhouettes_on(p: Points, labelings: &[(&[usize], usize)], threads: &Threads) -> Vec<f64> {
+    let n = p.len();
+    // f32 sums: at most SILHOUETTE_EXACT_MAX distances of at most 2 each.
+    let blocks = n.div_ceil(SIL_BLOCK);
+    let parts = threads.count().min(blocks).max(1);
+    let per = blocks.div_ceil(parts) * SIL_BLOCK;
+    let mut ranges: Vec<std::ops::Range<usize>> =
+        (0..n).step_by(per).map(|a| a..(a + per).min(n)).collect();
+    let pieces = threads.install(|| {
+        threads.map(&mut ranges, |r| {
+            cluster_distance_sums(p, labelings, r.clone())
+        })
+    });
     labelings
         .iter()
-        .zip(&sums)
-        .map(|(&(labels, k), sums)| {
+        .enumerate()
+        .map(|(li, &(labels, k))| {
+            let sums: Vec<f32> = pieces
+                .iter()
+                .flat_map(|piece| piece[li].iter().copied())
+                .collect();
             let mut counts = vec![0usize; k];
             for &l in labels {
                 counts[l] += 1;
@@ -421,10 +512,13 @@ pub fn silhouettes(p: Points, labelings: &[(&[usize], usize)]) -> Vec<f64> {
         .collect()
 }
 
+/// [`silhouettes_on`] on the calling thread.
+pub fn silhouettes(p: Points, labelings: &[(&[usize], usize)]) -> Vec<f64> {
+    silhouettes_on(p, labelings, &Threads::default())
+}
+
 /// The silhouettes of several labellings `(labels, k)`, on one seeded sample of
 /// [`SILHOUETTE_EXACT_MAX`] points when the set is larger.
-/// With several threads, the labellings are split into one group per thread (each group pays
-/// for the pairwise distances once).
 fn silhouette_scores(
     p: Points,
     labelings: &[(&[usize], usize)],
@@ -433,11 +527,7 @@ fn silhouette_scores(
 ) -> Vec<f64> {
     let n = p.len();
     if n <= SILHOUETTE_EXACT_MAX {
-        let groups = threads.count().min(labelings.len()).max(1);
-        let per = labelings.len().div_ceil(groups);
-        let mut chunks: Vec<&[(&[usize], usize)]> = labelings.chunks(per.max(1)).collect();
-        let scores = threads.install(|| threads.map(&mut chunks, |group| silhouettes(p, group)));
-        return scores.concat();
+        return silhouettes_on(p, labelings, threads);
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5151);
     let mut idx: Vec<usize> = (0..n).collect();

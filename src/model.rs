@@ -2,9 +2,15 @@
 //!
 //! ```text
 //! x [b, n, d] -> Linear(d, w)
-//!   -> depth x { h = ReLU(BN?(CN(Linear(w, w) x))); h = ReLU(BN?(CN(Linear(w, w) h))); x = x + h }
+//!   -> depth x { u = Linear(w, w) x  [+ mean over the point's graph neighbours j of G x_j]
+//!                h = ReLU(BN?(CN(u))); h = ReLU(BN?(CN(Linear(w, w) h))); x = x + h }
 //!   -> Linear(w, e) -> L2-normalise each point -> z [b, n, e]
 //! ```
+//! The bracketed term is the optional graph aggregation (beyond the paper, `graph_neighbors > 0`):
+//! a linear `G` of every block, averaged over the point's `graph_neighbors` nearest points in the
+//! input (itself included), as in GraphSAGE's mean aggregator. Stacked over the blocks it lets a
+//! point see along its curve, hop by hop, where context norm alone only gives it the whole set's
+//! statistics. It costs one more multiply per block and a gather.
 //! Context Normalization (CN) standardises every channel over the points of one set (no learned
 //! scale or shift). Linears inside the blocks carry no bias: CN's mean subtraction would cancel it.
 //! The optional BatchNorm follows CNe; note that after CN every channel already has zero mean and
@@ -22,6 +28,7 @@ use burn::store::{ModuleSnapshot, SafetensorsStore};
 use burn::tensor::activation::relu;
 use serde::{Deserialize, Serialize};
 
+use crate::data::features::knn_graph;
 pub use fused::FusedNet;
 
 /// Architecture of the embedding network; stored in every model card.
@@ -43,6 +50,10 @@ pub struct ModelConfig {
     /// see [`crate::data::features`]).
     #[serde(default)]
     pub neighbors: usize,
+    /// Graph aggregation over this many nearest points (itself included) in every block; 0 = off
+    /// (the paper's network). See the module docs.
+    #[serde(default)]
+    pub graph_neighbors: usize,
 }
 
 /// Why a model could not be built, saved or loaded.
@@ -66,6 +77,7 @@ impl ModelConfig {
             batch_norm: false,
             cn_epsilon: 1e-3,
             neighbors: 0,
+            graph_neighbors: 0,
         }
     }
 
@@ -84,6 +96,9 @@ impl ModelConfig {
         }
         if self.neighbors > 64 {
             return bad("neighbors must be at most 64");
+        }
+        if self.graph_neighbors > 64 {
+            return bad("graph_neighbors must be at most 64");
         }
         if self.depth > 256 {
             return bad("depth must be at most 256");
@@ -105,6 +120,8 @@ impl ModelConfig {
         let blocks = (0..self.depth)
             .map(|_| Block {
                 l1: LinearConfig::new(w, w).with_bias(false).init(device),
+                agg: (self.graph_neighbors > 0)
+                    .then(|| LinearConfig::new(w, w).with_bias(false).init(device)),
                 bn1: bn(self.batch_norm),
                 l2: LinearConfig::new(w, w).with_bias(false).init(device),
                 bn2: bn(self.batch_norm),
@@ -115,21 +132,25 @@ impl ModelConfig {
             blocks,
             output: LinearConfig::new(w, self.embed_dim).init(device),
             cn_epsilon: self.cn_epsilon,
+            coord_dim: self.input_dim,
+            graph_neighbors: self.graph_neighbors,
         })
     }
 
     /// Multiply-adds per point of one forward pass (for FLOP accounting in benchmarks).
     pub fn macs_per_point(&self) -> usize {
         self.feature_dim() * self.width
-            + 2 * self.depth * self.width * self.width
+            + (2 + usize::from(self.graph_neighbors > 0)) * self.depth * self.width * self.width
             + self.width * self.embed_dim
     }
 }
 
-/// One residual block: `[Linear, CN, BN?, ReLU] x 2 + skip`.
+/// One residual block: `[Linear (+ graph mean), CN, BN?, ReLU] x 2 + skip`.
 #[derive(Module, Debug)]
 pub struct Block {
     pub l1: Linear,
+    /// The graph aggregation's linear map `G` (graph models only).
+    pub agg: Option<Linear>,
     pub bn1: Option<BatchNorm>,
     pub l2: Linear,
     pub bn2: Option<BatchNorm>,
@@ -142,6 +163,11 @@ pub struct EmbeddingNet {
     pub blocks: Vec<Block>,
     pub output: Linear,
     pub cn_epsilon: f64,
+    /// Leading values of each input row that are the point's coordinates (the graph is built on
+    /// them).
+    pub coord_dim: usize,
+    /// Points per neighbourhood of the graph aggregation; 0 = none.
+    pub graph_neighbors: usize,
 }
 
 /// Context Normalization: zero mean, unit variance per channel over the points of each set.
@@ -163,30 +189,91 @@ pub fn l2_normalize(z: Tensor<3>) -> Tensor<3> {
     z / norm
 }
 
+/// The neighbourhoods of a batch of sets: `others[t]` holds, for each of the b * n rows, the row
+/// of its (t + 1)-th nearest point (the point itself is the 0-th and is implied).
+#[derive(Debug, Clone)]
+pub struct Graph {
+    pub others: Vec<Tensor<1, Int>>,
+}
+
+/// The mean over each point's neighbourhood (itself and `graph.others`) of `g`'s rows.
+/// g: [b, n, w] -> [b, n, w]
+pub fn neighbourhood_mean(g: Tensor<3>, graph: &Graph) -> Tensor<3> {
+    let [b, n, w] = g.dims();
+    let rows = g.reshape([b * n, w]);
+    let k = graph.others.len() + 1;
+    graph
+        .others
+        .iter()
+        .fold(rows.clone(), |m, idx| {
+            m + rows.clone().select(0, idx.clone())
+        })
+        .div_scalar(k as f64)
+        .reshape([b, n, w])
+}
+
 impl Block {
-    /// x: [b, n, w] -> [b, n, w]
-    fn forward(&self, x: Tensor<3>, eps: f64) -> Tensor<3> {
-        let stage = |lin: &Linear, bn: &Option<BatchNorm>, h: Tensor<3>| {
-            let mut h = context_norm(lin.forward(h), eps);
+    /// x: [b, n, w] -> [b, n, w]; `graph` (see [`Graph`]) is required when the block aggregates.
+    fn forward(&self, x: Tensor<3>, eps: f64, graph: Option<&Graph>) -> Tensor<3> {
+        let norm_relu = |u: Tensor<3>, bn: &Option<BatchNorm>| {
+            let mut h = context_norm(u, eps);
             if let Some(bn) = bn {
                 h = batch_norm(bn, h);
             }
             relu(h)
         };
-        let h = stage(&self.l1, &self.bn1, x.clone());
-        let h = stage(&self.l2, &self.bn2, h);
+        let mut u = self.l1.forward(x.clone());
+        if let Some(agg) = &self.agg {
+            let graph = graph.expect("EmbeddingNet::forward passes the graph to graph blocks");
+            u = u + neighbourhood_mean(agg.forward(x.clone()), graph);
+        }
+        let h = norm_relu(u, &self.bn1);
+        let h = norm_relu(self.l2.forward(h), &self.bn2);
         x + h
     }
 }
 
 impl EmbeddingNet {
-    /// points: [b, n, d] -> embeddings [b, n, e], each row of unit length.
+    /// points: [b, n, d] -> embeddings [b, n, e], each row of unit length. The graph of graph
+    /// models is built here from each set's coordinates (the first `coord_dim` values per row).
     pub fn forward(&self, points: Tensor<3>) -> Tensor<3> {
+        let graph = (self.graph_neighbors > 0).then(|| self.graph_of(&points));
         let mut x = self.input.forward(points);
         for block in &self.blocks {
-            x = block.forward(x, self.cn_epsilon);
+            x = block.forward(x, self.cn_epsilon, graph.as_ref());
         }
         l2_normalize(self.output.forward(x))
+    }
+
+    /// The neighbourhood graph of every set of a batch (see [`knn_graph`]), as indices into
+    /// its b * n rows. points: [b, n, d] -> graph_neighbors - 1 index tensors of [b * n]
+    fn graph_of(&self, points: &Tensor<3>) -> Graph {
+        let [b, n, d] = points.dims();
+        let k = self.graph_neighbors;
+        let values: Vec<f32> = points
+            .clone()
+            .into_data()
+            .convert::<f32>()
+            .try_to_vec::<f32>()
+            .expect("f32 points");
+        let mut ranks: Vec<Vec<i64>> = vec![Vec::with_capacity(b * n); k.saturating_sub(1)];
+        for (s, set) in values.chunks_exact((n * d).max(1)).enumerate() {
+            let g = knn_graph(set, d, self.coord_dim.min(d), k);
+            for row in g.chunks_exact(k) {
+                for (rank, &j) in ranks.iter_mut().zip(&row[1..]) {
+                    rank.push((s * n + j) as i64);
+                }
+            }
+        }
+        let device = points.device();
+        let others = ranks
+            .into_iter()
+            .map(|r| {
+                let len = r.len();
+                Tensor::<1, Int>::from_data(TensorData::new(r, [len]), &device)
+            })
+            .collect();
+        Graph { others }
     }
 
     /// Embeds one normalised point set given row-major `[n, d]`; returns row-major `[n, e]`.
@@ -258,6 +345,7 @@ mod tests {
             batch_norm: false,
             cn_epsilon: 1e-3,
             neighbors: 0,
+            graph_neighbors: 0,
         }
     }
 
@@ -298,25 +386,63 @@ mod tests {
     #[test]
     fn embeddings_are_unit_length_and_permutation_equivariant() {
         let device = cpu_device();
-        device.seed(3);
-        let net = tiny().init(&device).unwrap();
-        let n = 9;
-        let p = points(n, 4);
-        let z = net.embed(&p, 4, &device);
-        assert_eq!(z.len(), n * 3);
-        for row in z.chunks(3) {
-            let len: f32 = row.iter().map(|v| v * v).sum::<f32>().sqrt();
-            assert!((len - 1.0).abs() < 1e-5);
-        }
-        // Reverse the points: the embeddings reverse with them.
-        let rev: Vec<f32> = p.chunks(4).rev().flatten().copied().collect();
-        let zr = net.embed(&rev, 4, &device);
-        for (i, row) in zr.chunks(3).enumerate() {
-            let orig = &z[(n - 1 - i) * 3..(n - i) * 3];
-            for (a, b) in row.iter().zip(orig) {
-                assert!((a - b).abs() < 1e-5);
+        for graph_neighbors in [0, 4] {
+            device.seed(3);
+            let net = ModelConfig {
+                graph_neighbors,
+                ..tiny()
+            }
+            .init(&device)
+            .unwrap();
+            let n = 9;
+            let p = points(n, 4);
+            let z = net.embed(&p, 4, &device);
+            assert_eq!(z.len(), n * 3);
+            for row in z.chunks(3) {
+                let len: f32 = row.iter().map(|v| v * v).sum::<f32>().sqrt();
+                assert!((len - 1.0).abs() < 1e-5);
+            }
+            // Reverse the points: the embeddings reverse with them.
+            let rev: Vec<f32> = p.chunks(4).rev().flatten().copied().collect();
+            let zr = net.embed(&rev, 4, &device);
+            for (i, row) in zr.chunks(3).enumerate() {
+                let orig = &z[(n - 1 - i) * 3..(n - i) * 3];
+                for (a, b) in row.iter().zip(orig) {
+                    assert!((a - b).abs() < 1e-5, "graph {graph_neighbors}");
+                }
             }
         }
+    }
+
+    #[test]
+    fn graph_aggregation_by_hand() {
+        // Two sets of 3 rows, 2 channels; neighbourhoods of 2 given as indices into the 6 rows.
+        let device = cpu_device();
+        let g = Tensor::<3>::from_data(
+            TensorData::new(
+                vec![
+                    1.0f32, -1.0, 5.0, 0.0, 2.0, 9.0, 0.0, 0.0, -3.0, 4.0, 1.0, 1.0,
+                ],
+                [2, 3, 2],
+            ),
+            &device,
+        );
+        let graph = Graph {
+            others: vec![Tensor::<1, Int>::from_data(
+                TensorData::new(vec![1i64, 2, 0, 4, 5, 3], [6]),
+                &device,
+            )],
+        };
+        let y: Vec<f32> = neighbourhood_mean(g, &graph)
+            .into_data()
+            .try_to_vec()
+            .unwrap();
+        assert_eq!(
+            y,
+            vec![
+                3.0, -0.5, 3.5, 4.5, 1.5, 4.0, -1.5, 2.0, -1.0, 2.5, 0.5, 0.5
+            ]
+        );
     }
 
     #[test]

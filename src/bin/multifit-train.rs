@@ -101,6 +101,10 @@ struct TrainArgs {
     /// Append offsets to this many nearest neighbours to every point (0 = the paper's input).
     #[arg(long, default_value_t = 0)]
     neighbors: usize,
+    /// Graph aggregation in every block over this many nearest points, itself included
+    /// (0 = the paper's network).
+    #[arg(long, default_value_t = 0)]
+    graph_neighbors: usize,
     #[arg(long, default_value_t = 1e-3)]
     lr: f64,
     #[arg(long, value_enum, default_value = "cosine")]
@@ -210,6 +214,7 @@ impl TrainArgs {
                 batch_norm: self.batch_norm,
                 cn_epsilon: 1e-3,
                 neighbors: self.neighbors,
+                graph_neighbors: self.graph_neighbors,
             },
             loss,
             learning_rate: self.lr,

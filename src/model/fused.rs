@@ -12,13 +12,16 @@
 //! multiply, and the tile's per-channel mean and squared deviations. The tiles' moments are merged
 //! in tile order (Chan et al.'s pairwise update), which gives the set's mean and variance exactly
 //! and the same bits whatever the number of threads. Context norm needs the whole set's moments,
-//! so that merge is the only point where tiles wait for each other.
+//! so that merge is the only point where tiles wait for each other. In graph models a block's
+//! first multiply also computes `G x`; the neighbourhood mean over the whole set is then added in
+//! one more pass over the tiles before the moments are taken.
 
 use burn::nn::{BatchNorm, Linear};
 use burn::prelude::*;
 
 use super::gemm::matmul;
 use super::{EmbeddingNet, ModelError};
+use crate::data::features::knn_graph;
 use crate::threads::Threads;
 
 /// Rows per tile: large enough that a tile's matrix multiply amortises packing the weights,
@@ -44,6 +47,8 @@ struct Affine {
 #[derive(Debug, Clone)]
 struct FusedBlock {
     l1: Dense,
+    /// The graph aggregation's `G` (graph models only).
+    agg: Option<Dense>,
     bn1: Option<Affine>,
     l2: Dense,
     bn2: Option<Affine>,
@@ -56,6 +61,10 @@ pub struct FusedNet {
     blocks: Vec<FusedBlock>,
     output: Dense,
     cn_epsilon: f64,
+    /// Leading values of an input row that are the point (the graph is built on them).
+    coord_dim: usize,
+    /// Points per neighbourhood of the graph aggregation; 0 = none.
+    graph_neighbors: usize,
 }
 
 /// The values of a tensor as `f32`, row-major.
@@ -236,6 +245,71 @@ struct Tile<'a> {
     h2: &'a mut [f32],
     /// The embeddings: [rows, e].
     z: &'a mut [f32],
+    /// A graph block's `G x`: [rows, w] (empty without graph aggregation).
+    g: &'a mut [f32],
+}
+
+/// The buffers of one forward pass, row-major over the whole set.
+struct Buffers {
+    x: Vec<f32>,
+    h: Vec<f32>,
+    h2: Vec<f32>,
+    z: Vec<f32>,
+    g: Vec<f32>,
+}
+
+impl Buffers {
+    /// Cuts the buffers (and `points`, `[n, d]`) into tiles of [`TILE_ROWS`] rows.
+    fn tiles<'a>(&'a mut self, points: &'a [f32], d: usize, w: usize, e: usize) -> Vec<Tile<'a>> {
+        let gw = if self.g.is_empty() { 0 } else { w };
+        let mut g = self.g.chunks_mut((TILE_ROWS * gw).max(1));
+        points
+            .chunks(TILE_ROWS * d)
+            .zip(self.x.chunks_mut(TILE_ROWS * w))
+            .zip(self.h.chunks_mut(TILE_ROWS * w))
+            .zip(self.h2.chunks_mut(TILE_ROWS * w))
+            .zip(self.z.chunks_mut(TILE_ROWS * e))
+            .map(|((((points, x), h), h2), z)| Tile {
+                points,
+                x,
+                h,
+                h2,
+                z,
+                g: if gw == 0 {
+                    Default::default()
+                } else {
+                    g.next().unwrap_or_default()
+                },
+            })
+            .collect()
+    }
+}
+
+/// h[i] += the mean over the neighbourhood of point i of g's rows, per channel, for the rows of
+/// one tile starting at row `start`; returns the tile's moments of h. The neighbours are summed
+/// in the graph's order, as the burn forward does, so both give the same value.
+/// h: [rows, w], g: [n, w], graph: [n, k]
+fn add_neighbourhood_mean(
+    h: &mut [f32],
+    start: usize,
+    g: &[f32],
+    graph: &[usize],
+    w: usize,
+) -> Moments {
+    let k = graph.len() / (g.len() / w).max(1);
+    let inv = 1.0 / k as f32;
+    let mut sum = vec![0f32; w];
+    for (r, row) in h.chunks_exact_mut(w).enumerate() {
+        let i = start + r;
+        sum.iter_mut().for_each(|s| *s = 0.0);
+        for &j in &graph[i * k..(i + 1) * k] {
+            sum.iter_mut()
+                .zip(&g[j * w..(j + 1) * w])
+                .for_each(|(s, v)| *s += v);
+        }
+        row.iter_mut().zip(&sum).for_each(|(v, s)| *v += s * inv);
+    }
+    Moments::of(h, w)
 }
 
 impl FusedNet {
@@ -253,6 +327,11 @@ impl FusedNet {
                 };
                 Ok(FusedBlock {
                     l1: Dense::from_linear(&b.l1, &format!("blocks.{i}.l1"))?,
+                    agg: b
+                        .agg
+                        .as_ref()
+                        .map(|g| Dense::from_linear(g, &format!("blocks.{i}.agg")))
+                        .transpose()?,
                     bn1: bn(&b.bn1, "bn1")?,
                     l2: Dense::from_linear(&b.l2, &format!("blocks.{i}.l2"))?,
                     bn2: bn(&b.bn2, "bn2")?,
@@ -264,6 +343,8 @@ impl FusedNet {
             blocks,
             output: Dense::from_linear(&net.output, "output")?,
             cn_epsilon: net.cn_epsilon,
+            coord_dim: net.coord_dim,
+            graph_neighbors: net.graph_neighbors,
         })
     }
 
@@ -288,64 +369,100 @@ impl FusedNet {
         let (d, w, e) = (self.input.d_in, self.input.d_out, self.output.d_out);
         let n = points.len() / d;
         let eps = self.cn_epsilon;
-        let (mut x, mut h, mut h2) = (vec![0f32; n * w], vec![0f32; n * w], vec![0f32; n * w]);
-        let mut z = vec![0f32; n * e];
-        let mut tiles: Vec<Tile> = points
-            .chunks(TILE_ROWS * d)
-            .zip(x.chunks_mut(TILE_ROWS * w))
-            .zip(h.chunks_mut(TILE_ROWS * w))
-            .zip(h2.chunks_mut(TILE_ROWS * w))
-            .zip(z.chunks_mut(TILE_ROWS * e))
-            .map(|((((points, x), h), h2), z)| Tile {
-                points,
-                x,
-                h,
-                h2,
-                z,
-            })
-            .collect();
+        let graph = if self.graph_neighbors > 0 {
+            knn_graph(points, d, self.coord_dim.min(d), self.graph_neighbors)
+        } else {
+            Vec::new()
+        };
+        let mut buf = Buffers {
+            x: vec![0f32; n * w],
+            h: vec![0f32; n * w],
+            h2: vec![0f32; n * w],
+            z: vec![0f32; n * e],
+            g: if graph.is_empty() {
+                Vec::new()
+            } else {
+                vec![0f32; n * w]
+            },
+        };
+        // A block's first multiply (from the tile's residual stream x), and for graph blocks
+        // `G x` too: the moments then wait for the neighbourhood max over the whole set.
+        let first_multiply = |b: &FusedBlock, t: &mut Tile<'_>| match &b.agg {
+            None => {
+                b.l1.forward(t.x, t.h);
+                Some(Moments::of(t.h, w))
+            }
+            Some(agg) => {
+                b.l1.forward(t.x, t.h);
+                agg.forward(t.x, t.g);
+                None
+            }
+        };
+        // Finishes `first_multiply` for graph blocks: h += neighbourhood mean of G x.
+        let finish = |buf: &mut Buffers, part: Option<Moments>| -> Moments {
+            if let Some(m) = part {
+                return m;
+            }
+            let g = &buf.g;
+            let mut rows: Vec<(usize, &mut [f32])> = buf
+                .h
+                .chunks_mut(TILE_ROWS * w)
+                .enumerate()
+                .map(|(i, h)| (i * TILE_ROWS, h))
+                .collect();
+            threads
+                .map(&mut rows, |(start, h)| {
+                    add_neighbourhood_mean(h, *start, g, &graph, w)
+                })
+                .into_iter()
+                .reduce(Moments::merge)
+                .expect("at least one tile")
+        };
         // Input layer, then the first block's first multiply.
         let first = self.blocks.first();
-        let mut moments = tile_moments(threads, &mut tiles, |t| {
+        let part = merged(threads.map(&mut buf.tiles(points, d, w, e), |t| {
             self.input.forward(t.points, t.x);
             match first {
-                Some(b) => {
-                    b.l1.forward(t.x, t.h);
-                    Moments::of(t.h, w)
-                }
-                None => Moments::of(&[], w),
+                Some(b) => first_multiply(b, t),
+                None => Some(Moments::of(&[], w)),
             }
-        });
+        }));
+        let mut moments = finish(&mut buf, part);
         for (i, block) in self.blocks.iter().enumerate() {
             let (a, c) = moments.coefficients(eps, block.bn1.as_ref());
-            moments = tile_moments(threads, &mut tiles, |t| {
+            moments = tile_moments(threads, &mut buf.tiles(points, d, w, e), |t| {
                 scale_relu(t.h, &a, &c);
                 block.l2.forward(t.h, t.h2);
                 Moments::of(t.h2, w)
             });
             let (a, c) = moments.coefficients(eps, block.bn2.as_ref());
             let next = self.blocks.get(i + 1);
-            moments = tile_moments(threads, &mut tiles, |t| {
+            let part = merged(threads.map(&mut buf.tiles(points, d, w, e), |t| {
                 residual_scale_relu(t.x, t.h2, &a, &c);
                 match next {
-                    Some(b) => {
-                        b.l1.forward(t.x, t.h);
-                        Moments::of(t.h, w)
-                    }
-                    None => Moments::of(&[], w),
+                    Some(b) => first_multiply(b, t),
+                    None => Some(Moments::of(&[], w)),
                 }
-            });
+            }));
+            moments = finish(&mut buf, part);
         }
-        threads.map(&mut tiles, |t| {
+        threads.map(&mut buf.tiles(points, d, w, e), |t| {
             self.output.forward(t.x, t.z);
             for row in t.z.chunks_exact_mut(e) {
                 let norm = row.iter().map(|v| v * v).sum::<f32>().sqrt().max(1e-12);
                 row.iter_mut().for_each(|v| *v /= norm);
             }
         });
-        drop(tiles);
-        z
+        buf.z
     }
+}
+
+/// The tiles' moments merged in tile order, or None when the tiles left them to a later pass.
+fn merged(parts: Vec<Option<Moments>>) -> Option<Moments> {
+    parts
+        .into_iter()
+        .collect::<Option<Vec<Moments>>>()
+        .and_then(|p| p.into_iter().reduce(Moments::merge))
 }
 
 #[cfg(test)]
@@ -370,7 +487,13 @@ mod tests {
     #[test]
     fn matches_the_burn_forward() {
         let device = cpu_device();
-        for (seed, batch_norm, neighbors) in [(1, false, 0), (2, true, 0), (3, false, 2)] {
+        for (seed, batch_norm, neighbors, graph_neighbors) in [
+            (1, false, 0, 0),
+            (2, true, 0, 0),
+            (3, false, 2, 0),
+            (4, false, 0, 6),
+            (5, true, 3, 4),
+        ] {
             device.seed(seed);
             let cfg = ModelConfig {
                 input_dim: 4,
@@ -380,6 +503,7 @@ mod tests {
                 batch_norm,
                 cn_epsilon: 1e-3,
                 neighbors,
+                graph_neighbors,
             };
             let net = cfg.init(&device).unwrap();
             let fused = FusedNet::from_net(&net).unwrap();
@@ -390,7 +514,10 @@ mod tests {
                 let want = net.embed(&x, cfg.feature_dim(), &device);
                 let one = fused.forward(&x, &Threads::new(1).unwrap());
                 let diff = max_abs_diff(&want, &one);
-                assert!(diff < 1e-4, "seed {seed}, bn {batch_norm}, n {n}: {diff}");
+                assert!(
+                    diff < 1e-4,
+                    "seed {seed}, bn {batch_norm}, graph {graph_neighbors}, n {n}: {diff}"
+                );
                 // Bit-identical whatever the threads.
                 for threads in [2, 3] {
                     assert_eq!(one, fused.forward(&x, &Threads::new(threads).unwrap()));
@@ -412,6 +539,7 @@ mod tests {
             batch_norm: true,
             cn_epsilon: 1e-3,
             neighbors: 0,
+            graph_neighbors: 0,
         };
         let mut net = cfg.init(&device).unwrap();
         let set = |v: Vec<f32>| Tensor::<1>::from_data(TensorData::new(v, [8]), &device);

@@ -459,6 +459,7 @@ mod tests {
                 batch_norm: false,
                 cn_epsilon: 1e-3,
                 neighbors: 0,
+                graph_neighbors: 0,
             },
             loss,
             learning_rate: 1e-2,
