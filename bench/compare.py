@@ -11,10 +11,13 @@ What it does, in order:
    stdout, and waits for `/health/ready`;
 3. checks that the peer's embeddings agree with the server's (`return_embeddings: true`);
 4. latency: R fits of that input with `selection: silhouette`, `k_max: 8` and a fixed seed,
-   alternating one `POST /v1/fit` (timed client-side, HTTP and JSON included, keep-alive
-   connection) and one in-process Python peer fit (from the numpy array of raw pixels to labels,
-   so the peer pays no parsing or HTTP; one BLAS / OpenMP thread unless `--py-threads` says
-   otherwise); p50 / p90 of both and the ratio;
+   each a `POST /v1/fit` (timed client-side, HTTP and JSON included, keep-alive connection) or an
+   in-process Python peer fit (from the numpy array of raw pixels to labels, so the peer pays no
+   parsing or HTTP; one BLAS / OpenMP thread unless `--py-threads` says otherwise); p50 / p90 of
+   both and the ratio, twice: interleaved (one server fit, one peer fit, alternating) and in
+   blocks (each side's R fits back to back). On this project's VM a core left idle for ~100 ms
+   runs the next few milliseconds of work up to 1.8x slower, so interleaving makes every server
+   fit start cold while the peer's 130 ms fits amortise it; blocks show each side warm;
 5. throughput: C client threads send the same request back to back for T seconds against the
    server with `--workers 1`, then the one with `--workers 2`, alternating for `--rounds` rounds
    (the servers run side by side; an idle one costs nothing); requests per second summed over the
@@ -210,33 +213,50 @@ def verify(url: str, peer: python_peer.Model, request: dict, points, image) -> d
 
 
 def latency(url: str, peer: python_peer.Model, request: dict, points, image,
-            requests: int, warmup: int) -> dict:
-    """Alternates one server fit and one peer fit, R times each, after `warmup` of each."""
+            requests: int, warmup: int, order: str) -> dict:
+    """R server fits and R peer fits, after `warmup` of each. `order` "interleaved": one server
+    fit, then one peer fit, and so on, so every fit starts right after ~100 ms of the other
+    side's work (on a VM whose idle core slows down, each server fit then starts cold);
+    "blocks": the R server fits back to back, then the R peer fits back to back (each side warm,
+    as under steady traffic)."""
     body = json.dumps(request).encode()
     client = Client(url)
     server_ms, server_embed, server_cluster, server_k = [], [], [], []
     peer_ms, peer_embed, peer_cluster, peer_k = [], [], [], []
-    try:
-        for i in range(warmup + requests):
-            t0 = time.perf_counter()
-            answer = fit_ok(client, body)
-            t1 = time.perf_counter()
-            mine = peer.fit(points, image, k_max=request["k_max"],
-                            selection=request["selection"], seed=request["seed"])
-            t2 = time.perf_counter()
-            if i < warmup:
-                continue
-            server_ms.append((t1 - t0) * 1e3)
+
+    def server_fit(record: bool) -> None:
+        t0 = time.perf_counter()
+        answer = fit_ok(client, body)
+        if record:
+            server_ms.append((time.perf_counter() - t0) * 1e3)
             server_embed.append(answer["timing_ms"]["embed"])
             server_cluster.append(answer["timing_ms"]["cluster"])
             server_k.append(answer["k"])
-            peer_ms.append((t2 - t1) * 1e3)
+
+    def peer_fit(record: bool) -> None:
+        t0 = time.perf_counter()
+        mine = peer.fit(points, image, k_max=request["k_max"],
+                        selection=request["selection"], seed=request["seed"])
+        if record:
+            peer_ms.append((time.perf_counter() - t0) * 1e3)
             peer_embed.append(mine["timing_ms"]["embed"])
             peer_cluster.append(mine["timing_ms"]["cluster"])
             peer_k.append(mine["k"])
+
+    try:
+        if order == "interleaved":
+            for i in range(warmup + requests):
+                server_fit(i >= warmup)
+                peer_fit(i >= warmup)
+        else:
+            for i in range(warmup + requests):
+                server_fit(i >= warmup)
+            for i in range(warmup + requests):
+                peer_fit(i >= warmup)
     finally:
         client.close()
     return {
+        "order": order,
         "requests": requests,
         "server_p50_ms": pct(server_ms, 50),
         "server_p90_ms": pct(server_ms, 90),
@@ -318,20 +338,25 @@ def machine() -> str:
 
 def table(res: dict) -> str:
     a = res["args"]
-    lat, agree = res["latency"], res["agreement"]
+    agree = res["agreement"]
     head = (f"N = {a['n']}, `{a['model']}`, selection silhouette, k_max {a['k_max']}, "
             f"seed {a['seed']}")
-    rows = [
-        ("`POST /v1/fit` latency p50 / p90 (client-side, HTTP included)",
-         f"{lat['server_p50_ms']:.1f} / {lat['server_p90_ms']:.1f} ms"),
-        ("  of which embed / cluster p50 (server-reported)",
-         f"{lat['server_embed_p50_ms']:.1f} / {lat['server_cluster_p50_ms']:.1f} ms"),
-        ("Python peer (numpy + scikit-learn, in-process) p50 / p90",
-         f"{lat['peer_p50_ms']:.1f} / {lat['peer_p90_ms']:.1f} ms"),
-        ("  of which embed / cluster p50",
-         f"{lat['peer_embed_p50_ms']:.1f} / {lat['peer_cluster_p50_ms']:.1f} ms"),
-        ("latency ratio, Python p50 / multifit p50", f"{lat['ratio_p50']:.1f}x"),
-    ]
+    rows = []
+    for lat in res["latency"]:
+        how = ("one server fit, one peer fit, alternating" if lat["order"] == "interleaved"
+               else "each side's fits back to back")
+        rows += [
+            (f"**{lat['order']}** ({how}; server `--workers {lat.get('server_workers', '?')}`)", ""),
+            ("`POST /v1/fit` latency p50 / p90 (client-side, HTTP included)",
+             f"{lat['server_p50_ms']:.1f} / {lat['server_p90_ms']:.1f} ms"),
+            ("  of which embed / cluster p50 (server-reported)",
+             f"{lat['server_embed_p50_ms']:.1f} / {lat['server_cluster_p50_ms']:.1f} ms"),
+            ("Python peer (numpy + scikit-learn, in-process) p50 / p90",
+             f"{lat['peer_p50_ms']:.1f} / {lat['peer_p90_ms']:.1f} ms"),
+            ("  of which embed / cluster p50",
+             f"{lat['peer_embed_p50_ms']:.1f} / {lat['peer_cluster_p50_ms']:.1f} ms"),
+            ("latency ratio, Python p50 / multifit p50", f"{lat['ratio_p50']:.1f}x"),
+        ]
     tp = res["throughput"]
     for w, t in tp.items():
         where = "the `--url` server" if w == "given" else f"`--workers {w}`"
@@ -427,9 +452,13 @@ def main() -> int:
         print(f"[{label}] checking embeddings against the peer", file=sys.stderr)
         res["agreement"] = verify(url, peer, request, points, image)
         print(f"[{label}] {res['agreement']}", file=sys.stderr)
-        print(f"[{label}] latency: {args.requests} fits per side", file=sys.stderr)
-        res["latency"] = latency(url, peer, request, points, image, args.requests, args.warmup)
-        print(f"[{label}] {res['latency']}", file=sys.stderr)
+        res["latency"] = []
+        for order in ("interleaved", "blocks"):
+            print(f"[{label}] latency, {order}: {args.requests} fits per side", file=sys.stderr)
+            lat = latency(url, peer, request, points, image, args.requests, args.warmup, order)
+            lat["server_workers"] = label
+            res["latency"].append(lat)
+            print(f"[{label}] {lat}", file=sys.stderr)
 
     def run_throughput(urls: dict[str, str]) -> None:
         # Rounds alternate between the servers so that a change in background load hits every
@@ -466,7 +495,6 @@ def main() -> int:
                                     shlex.split(args.server_args))
                 print(f"[{w}] server with --workers {w} at {servers[w].url}", file=sys.stderr)
             run_latency(servers[lat_w].url, str(lat_w))
-            res["latency"]["server_workers"] = lat_w
             run_throughput({str(w): servers[w].url for w in sweep})
         finally:
             for server in servers.values():

@@ -215,15 +215,22 @@ impl LoadedModel {
         })
     }
 
-    /// Gives each fit (forward pass and k-means) `threads` threads of a pool of this model's own: a server
-    /// running W fits at once on C cores gives each C / W, so threads are never oversubscribed.
-    pub fn with_threads(mut self, threads: usize) -> Result<Self, ModelError> {
-        self.threads = Threads::new(threads)
+    /// Runs fits (forward pass and k-means) on a pool of `threads` threads of this model's own.
+    pub fn with_threads(self, threads: usize) -> Result<Self, ModelError> {
+        let pool = Threads::new(threads)
             .map_err(|e| ModelError::Config(format!("cannot start {threads} threads: {e}")))?;
-        Ok(self)
+        Ok(self.with_pool(pool))
     }
 
-    /// Threads one fit may use.
+    /// Runs fits on `pool`, which other models and fits may share: the server gives every model
+    /// one pool of as many threads as cores, so a fit alone uses every core and fits at once
+    /// split them, never oversubscribing.
+    pub fn with_pool(mut self, pool: Threads) -> Self {
+        self.threads = pool;
+        self
+    }
+
+    /// Threads of the pool fits run on.
     pub fn threads(&self) -> usize {
         self.threads.count()
     }

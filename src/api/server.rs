@@ -11,7 +11,9 @@ use tokio::net::TcpListener;
 
 use super::routes::{AppState, router};
 use super::types::Limits;
+use crate::model::ModelError;
 use crate::registry::{RegistryError, load_all};
+use crate::threads::Threads;
 
 /// Log output format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
@@ -31,8 +33,8 @@ pub struct ServerConfig {
     pub queue_capacity: usize,
     pub request_timeout: Duration,
     pub workers: usize,
-    /// Threads one fit may use (forward pass, k-means, silhouettes); `workers * fit_threads`
-    /// should not exceed the cores.
+    /// Threads of the one pool every fit computes on (forward pass, k-means, silhouettes); a fit
+    /// alone uses them all, fits at once share them.
     pub fit_threads: usize,
     pub log_format: LogFormat,
 }
@@ -114,12 +116,20 @@ pub async fn serve(
     let dir = config.models.clone();
     let fit_threads = config.fit_threads;
     tokio::task::spawn_blocking(move || {
-        let loaded = load_all(&dir).and_then(|models| {
-            models
-                .into_iter()
-                .map(|(name, m)| Ok((name, m.with_threads(fit_threads)?)))
-                .collect::<Result<std::collections::BTreeMap<_, _>, RegistryError>>()
-        });
+        let loaded = Threads::new(fit_threads)
+            .map_err(|e| {
+                RegistryError::Weights(ModelError::Config(format!(
+                    "cannot start {fit_threads} fit threads: {e}"
+                )))
+            })
+            .and_then(|pool| {
+                load_all(&dir).map(|models| {
+                    models
+                        .into_iter()
+                        .map(|(name, m)| (name, m.with_pool(pool.clone())))
+                        .collect::<std::collections::BTreeMap<_, _>>()
+                })
+            });
         match loaded {
             Ok(models) => {
                 let names: Vec<&String> = models.keys().collect();

@@ -43,8 +43,9 @@ struct Args {
     /// Fits computed at once (default: available parallelism, which respects cgroup limits).
     #[arg(long, env = "MULTIFIT_WORKERS")]
     workers: Option<usize>,
-    /// Threads each fit may use (default: available parallelism / workers, at least 1, so that
-    /// workers x fit threads never exceeds the cores).
+    /// Threads of the one pool all fits compute on (default: available parallelism). A fit
+    /// alone uses every thread; fits running at once share them, so the server never computes
+    /// on more threads than this, whatever --workers says.
     #[arg(long, env = "MULTIFIT_FIT_THREADS")]
     fit_threads: Option<usize>,
     /// Log format.
@@ -69,7 +70,7 @@ impl Args {
             queue_capacity: self.queue_capacity,
             request_timeout: Duration::from_millis(self.request_timeout_ms),
             workers,
-            fit_threads: self.fit_threads.unwrap_or((cores / workers.max(1)).max(1)),
+            fit_threads: self.fit_threads.unwrap_or(cores),
             log_format: self.log_format,
         }
     }
