@@ -842,6 +842,88 @@ mod tests {
     }
 
     #[test]
+    fn silhouettes_do_not_depend_on_threads() {
+        // 1000 points: several 16-row blocks per thread and a ragged last block.
+        let data: Vec<f32> = (0..1003 * 5)
+            .map(|i| ((i * 7919 % 2003) as f32 / 1001.5) - 1.0)
+            .collect();
+        let p = Points::new(&data, 5).unwrap();
+        let a: Vec<usize> = (0..1003).map(|i| i % 3).collect();
+        let b: Vec<usize> = (0..1003).map(|i| (i * 13 / 7) % 7).collect();
+        let labelings: Vec<(&[usize], usize)> = vec![(&a, 3), (&b, 7)];
+        let one = silhouettes(p, &labelings);
+        for t in [2, 3] {
+            let pool = Threads::new(t).unwrap();
+            assert_eq!(one, silhouettes_on(p, &labelings, &pool), "{t} threads");
+        }
+        let want = silhouette_reference(p, &b, 7);
+        assert!((one[1] - want).abs() < 1e-5, "{} vs {want}", one[1]);
+    }
+
+    /// Plain Lloyd (every distance every iteration), the reference for the bounded one.
+    fn lloyd_reference(p: Points, k: usize, mut centroids: Vec<f64>) -> Vec<usize> {
+        let mut labels = vec![usize::MAX; p.len()];
+        loop {
+            let next: Vec<usize> = (0..p.len())
+                .map(|i| {
+                    (0..k)
+                        .min_by(|&a, &b| {
+                            sq_dist(p.row(i), &centroids[a * p.dim..(a + 1) * p.dim]).total_cmp(
+                                &sq_dist(p.row(i), &centroids[b * p.dim..(b + 1) * p.dim]),
+                            )
+                        })
+                        .unwrap()
+                })
+                .collect();
+            if next == labels {
+                return labels;
+            }
+            labels = next;
+            let mut sums = vec![0f64; k * p.dim];
+            let mut counts = vec![0usize; k];
+            for (i, &l) in labels.iter().enumerate() {
+                counts[l] += 1;
+                for (s, &v) in sums[l * p.dim..].iter_mut().zip(p.row(i)) {
+                    *s += f64::from(v);
+                }
+            }
+            for c in 0..k {
+                assert!(counts[c] > 0, "reference hit an empty cluster");
+                for s in &mut sums[c * p.dim..(c + 1) * p.dim] {
+                    *s /= counts[c] as f64;
+                }
+            }
+            centroids = sums;
+        }
+    }
+
+    #[test]
+    fn bounded_lloyd_matches_plain_lloyd() {
+        // Overlapping groups, so that many points change cluster over several iterations.
+        let data: Vec<f32> = (0..600 * 4)
+            .map(|i| {
+                let group = (i / 4) % 5;
+                ((i * 7919 % 1009) as f32 / 504.5 - 1.0) + group as f32 * 0.6
+            })
+            .collect();
+        let p = Points::new(&data, 4).unwrap();
+        for k in [2, 3, 5, 8] {
+            let mut rng = ChaCha8Rng::seed_from_u64(k as u64);
+            let init = kmeans_pp(p, k, &mut rng);
+            let want = lloyd_reference(p, k, init.clone());
+            let got = lloyd(p, k, init, 1000);
+            assert_eq!(got.labels, want, "k {k}");
+            let residual: f64 = (0..p.len())
+                .map(|i| {
+                    let l = got.labels[i];
+                    sq_dist(p.row(i), &got.centroids[l * p.dim..(l + 1) * p.dim])
+                })
+                .sum();
+            assert!((got.residual - residual).abs() <= 1e-9 * residual);
+        }
+    }
+
+    #[test]
     fn sod_by_hand() {
         // log r: 0, -2, -2.5, -2.7 -> sod(2) = 0 - 2.5 + 4 = 1.5, sod(3) = -2 - 2.7 + 5 = 0.3.
         let r: Vec<(usize, f64)> = [0.0, -2.0, -2.5, -2.7]

@@ -287,7 +287,7 @@ impl Buffers {
 
 /// h[i] += the mean over the neighbourhood of point i of g's rows, per channel, for the rows of
 /// one tile starting at row `start`; returns the tile's moments of h. The neighbours are summed
-/// in the graph's order, as the burn forward does, so both give the same value.
+/// in the graph's order (the point first), as the burn forward does.
 /// h: [rows, w], g: [n, w], graph: [n, k]
 fn add_neighbourhood_mean(
     h: &mut [f32],
