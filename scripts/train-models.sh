@@ -28,8 +28,8 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         [ -d runs/data/lce-unmixed-train ] || $T gen-lce --out runs/data/lce-unmixed-train --count 4000 --seed 2 --variant unmixed
         [ -d runs/data/lce-val ] || $T gen-lce --out runs/data/lce-val --count 100 --seed 3 --variant mixed
         $T train --name lce --data runs/data/lce-train --data runs/data/lce-unmixed-train --val runs/data/lce-val \
-          --loss l2 --embed-dim 6 --width 64 --depth 6 --neighbors 16 --batch-size 16 --lr 2e-3 --schedule cosine \
-          --epochs ${LCE_EPOCHS:-25} --k-max 6 \
+          --loss l2 --embed-dim 6 --width 64 --depth 6 --neighbors 16 --graph-neighbors 16 --batch-size 16 --lr 2e-3 --schedule cosine \
+          --epochs ${LCE_EPOCHS:-60} --k-max 6 \
           --describe "Synthetic LCE: 4000 mixed (line, 2 ellipses, circle) + 4000 unmixed (2-4 of one type) samples, 50 points per shape, noise 0.05; validation 100 mixed samples (seed 3)" ;;
       *) echo "unknown model $m" >&2; exit 2 ;;
     esac
