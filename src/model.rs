@@ -112,7 +112,23 @@ impl ModelConfig {
         Ok(())
     }
 
-    /// A freshly initialised network on `device` (seed the device first for reproducibility).
+    /// A freshly initialised network drawn from `seed`. burn's random state is global to the
+    /// backend, so seeding and drawing hold one process-wide lock: two inits at once (tests, or
+    /// trainings in one process) cannot interleave their draws, and a seed always gives the
+    /// same weights.
+    pub fn init_seeded(&self, device: &Device, seed: u64) -> Result<EmbeddingNet, ModelError> {
+        static RNG: std::sync::Mutex<()> = std::sync::Mutex::new(());
+        let _guard = RNG.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+        device.seed(seed);
+        let net = self.init(device)?;
+        // burn draws a parameter's values on its first access: draw them all now, in field
+        // order, while the lock is held.
+        net.visit(&mut Materialize);
+        Ok(net)
+    }
+
+    /// A freshly initialised network on `device`, drawn from burn's current random state (see
+    /// [`ModelConfig::init_seeded`] for reproducible weights).
     pub fn init(&self, device: &Device) -> Result<EmbeddingNet, ModelError> {
         self.validate()?;
         let w = self.width;
@@ -142,6 +158,15 @@ impl ModelConfig {
         self.feature_dim() * self.width
             + (2 + usize::from(self.graph_neighbors > 0)) * self.depth * self.width * self.width
             + self.width * self.embed_dim
+    }
+}
+
+/// Forces burn's lazy parameter initialisation (the random draws happen on first access).
+struct Materialize;
+
+impl burn::module::ModuleVisitor for Materialize {
+    fn visit_float<const D: usize>(&mut self, param: &burn::module::Param<Tensor<D>>) {
+        let _ = param.val();
     }
 }
 
@@ -387,12 +412,11 @@ mod tests {
     fn embeddings_are_unit_length_and_permutation_equivariant() {
         let device = cpu_device();
         for graph_neighbors in [0, 4] {
-            device.seed(3);
             let net = ModelConfig {
                 graph_neighbors,
                 ..tiny()
             }
-            .init(&device)
+            .init_seeded(&device, 3)
             .unwrap();
             let n = 9;
             let p = points(n, 4);
@@ -448,13 +472,12 @@ mod tests {
     #[test]
     fn safetensors_round_trip_is_bit_identical() {
         let device = cpu_device();
-        device.seed(5);
         for bn in [false, true] {
             let cfg = ModelConfig {
                 batch_norm: bn,
                 ..tiny()
             };
-            let net = cfg.init(&device).unwrap();
+            let net = cfg.init_seeded(&device, 5).unwrap();
             let dir = std::env::temp_dir()
                 .join(format!("multifit-model-test-{}-{bn}", std::process::id()));
             std::fs::create_dir_all(&dir).unwrap();

@@ -494,7 +494,6 @@ mod tests {
             (4, false, 0, 6),
             (5, true, 3, 4),
         ] {
-            device.seed(seed);
             let cfg = ModelConfig {
                 input_dim: 4,
                 width: 32,
@@ -505,7 +504,7 @@ mod tests {
                 neighbors,
                 graph_neighbors,
             };
-            let net = cfg.init(&device).unwrap();
+            let net = cfg.init_seeded(&device, seed).unwrap();
             let fused = FusedNet::from_net(&net).unwrap();
             assert_eq!(fused.input_dim(), cfg.feature_dim());
             assert_eq!(fused.embed_dim(), 5);
@@ -530,7 +529,6 @@ mod tests {
     fn batch_norm_running_statistics_are_folded_in() {
         // Non-trivial running statistics and affine parameters, set by hand.
         let device = cpu_device();
-        device.seed(9);
         let cfg = ModelConfig {
             input_dim: 2,
             width: 8,
@@ -541,7 +539,7 @@ mod tests {
             neighbors: 0,
             graph_neighbors: 0,
         };
-        let mut net = cfg.init(&device).unwrap();
+        let mut net = cfg.init_seeded(&device, 9).unwrap();
         let set = |v: Vec<f32>| Tensor::<1>::from_data(TensorData::new(v, [8]), &device);
         let bn = net.blocks[0].bn1.as_mut().unwrap();
         bn.running_mean =

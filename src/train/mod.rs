@@ -299,8 +299,7 @@ pub fn train(
     let start = Instant::now();
     let device = cpu_device();
     let ad = device.clone().autodiff();
-    ad.seed(config.seed);
-    let mut model = config.model.init(&ad)?;
+    let mut model = config.model.init_seeded(&ad, config.seed)?;
     let mut history: Vec<EpochLog> = Vec::new();
     let mut best_epoch = 0;
     let mut best_score = f64::INFINITY;
