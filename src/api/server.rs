@@ -34,7 +34,7 @@ pub struct ServerConfig {
     pub request_timeout: Duration,
     pub workers: usize,
     /// Threads of the one pool every fit computes on (forward pass, k-means, silhouettes); a fit
-    /// alone uses them all, fits at once share them.
+    /// alone uses them all, fits at once share them. 1: no pool, each fit on its worker thread.
     pub fit_threads: usize,
     pub log_format: LogFormat,
 }

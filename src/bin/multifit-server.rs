@@ -44,8 +44,8 @@ struct Args {
     #[arg(long, env = "MULTIFIT_WORKERS")]
     workers: Option<usize>,
     /// Threads of the one pool all fits compute on (default: available parallelism). A fit
-    /// alone uses every thread; fits running at once share them, so the server never computes
-    /// on more threads than this, whatever --workers says.
+    /// alone uses every thread; fits running at once share them. With 1 there is no pool: each
+    /// fit runs on its own worker thread, --workers of them at once.
     #[arg(long, env = "MULTIFIT_FIT_THREADS")]
     fit_threads: Option<usize>,
     /// Log format.

@@ -32,7 +32,7 @@ fn nearest_all(points: &[f32], stride: usize, dim: usize, k: usize) -> Vec<usize
     for (pos, &i) in order.iter().enumerate() {
         let p = row(i);
         heap.clear();
-        let mut visit = |j: usize, heap: &mut BinaryHeap<(u32, usize)>| -> bool {
+        let visit = |j: usize, heap: &mut BinaryHeap<(u32, usize)>| -> bool {
             let q = row(j);
             let dx = (p[0] - q[0]) * (p[0] - q[0]);
             if heap.len() == take && dx.to_bits() > heap.peek().map_or(u32::MAX, |t| t.0) {
