@@ -1,8 +1,9 @@
 //! K-means on embeddings, the residual curve r(K) and the choice of K (section 3.3 of the paper).
 //!
-//! - [`kmeans`]: Lloyd iterations from k-means++ seeds, several restarts, the lowest residual
-//!   kept. Deterministic for a fixed seed: every K draws from its own stream derived from the seed,
-//!   so a K's clustering does not depend on which other K were tried.
+//! - [`kmeans`]: Lloyd iterations (with Hamerly's distance bounds, which skip work without
+//!   changing the result) from k-means++ seeds, several restarts, the lowest residual kept.
+//!   Deterministic for a fixed seed: every K draws from its own stream derived from the seed, so
+//!   a K's clustering does not depend on which other K were tried.
 //! - `r(K) = sum_m sum_{i in C_m} ||z_i - mu_m||^2`.
 //! - K selection ([`Selection`]):
 //!   - `Sod`: the second-order difference of `l(K) = log r(K)`,
