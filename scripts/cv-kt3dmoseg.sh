@@ -2,7 +2,7 @@
 # Leave-one-sequence-out cross-validation on KT3DMoSeg (22 folds, test = frames 1..5 of the
 # held-out sequence), for the losses and protocols given. Results: runs/cv/kt3dmoseg-<protocol>-<loss>/
 # (folds/*.json, summary.json). Finished folds are kept; rerunning resumes.
-# Usage: scripts/cv-kt3dmoseg.sh "vanilla augment" "mimi ce l2" [extra multifit-train flags]
+# Usage: [JOBS=2] scripts/cv-kt3dmoseg.sh "vanilla augment" "mimi ce l2" [extra multifit-train flags]
 set -euo pipefail
 cd "$(dirname "$0")/.."
 protocols=${1:-vanilla}
@@ -16,6 +16,6 @@ for protocol in $protocols; do
     [ "$protocol" = augment ] && epochs=60
     ./target/release/multifit-train cv --data "$data" --protocol "$protocol" --loss "$loss" \
       --embed-dim 5 --width 128 --depth 12 --lr 1e-3 --schedule cosine --epochs "$epochs" --k-max 8 \
-      --jobs 2 --out "runs/cv/kt3dmoseg-$protocol-$loss" "$@"
+      --jobs "${JOBS:-2}" --out "runs/cv/kt3dmoseg-$protocol-$loss" "$@"
   done
 done

@@ -339,6 +339,7 @@ fn overload_answers_429_and_timeouts_503() {
         LceConfig {
             points_per_shape: 2500,
             noise: 0.05,
+            ..LceConfig::default()
         },
     )
     .sample(LceVariant::Mixed, "big")
@@ -469,6 +470,7 @@ fn sigterm_drains_in_flight_requests_and_exits_zero() {
         LceConfig {
             points_per_shape: 2000,
             noise: 0.05,
+            ..LceConfig::default()
         },
     )
     .sample(LceVariant::Mixed, "big")

@@ -29,6 +29,7 @@ fn slow_body(per_shape: usize) -> (Vec<u8>, usize) {
         LceConfig {
             points_per_shape: per_shape,
             noise: 0.05,
+            ..LceConfig::default()
         },
     )
     .sample(LceVariant::Mixed, "load")

@@ -57,6 +57,9 @@ struct GenLceArgs {
     /// Gaussian noise sigma on the unit-scale frame.
     #[arg(long, default_value_t = 0.05)]
     noise: f64,
+    /// Multiplies every shape length but not the noise (2 = half the relative noise).
+    #[arg(long, default_value_t = 1.0)]
+    scale: f64,
 }
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
@@ -294,9 +297,13 @@ fn gen_lce(a: GenLceArgs) -> Result<()> {
     let config = LceConfig {
         points_per_shape: a.points_per_shape,
         noise: a.noise,
+        scale: a.scale,
     };
     if config.points_per_shape < 2 || !(config.noise.is_finite() && config.noise >= 0.0) {
         bail!("points per shape must be at least 2 and noise finite and non-negative");
+    }
+    if !(config.scale.is_finite() && config.scale > 0.0) {
+        bail!("scale must be finite and positive");
     }
     let variant = match a.variant {
         VariantArg::Mixed => LceVariant::Mixed,

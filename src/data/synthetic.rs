@@ -9,7 +9,9 @@
 //! - ellipse: centre uniform in `[-0.5, 0.5]^2`, semi-major axis uniform in `[0.3, 0.7]`, minor /
 //!   major ratio uniform in `[0.3, 0.7]` (so it never looks like a circle), rotation uniform in
 //!   `[0, pi)`, parameter angle uniform;
-//! - `points_per_shape` points per structure (50 by default), rows shuffled.
+//! - `points_per_shape` points per structure (50 by default), rows shuffled;
+//! - `scale` (1 by default) multiplies every length above (centre box, half-length, radii, axes)
+//!   but not the noise, so `scale = 2` gives the same shapes with half the relative noise.
 //!
 //! LCE (mixed): one line, two ellipses and one circle. LCE-Unmixed: 2 to 4 instances of one type.
 
@@ -49,6 +51,13 @@ pub enum LceVariant {
 pub struct LceConfig {
     pub points_per_shape: usize,
     pub noise: f64,
+    /// Multiplies every shape length (not the noise); 1 is the unit-scale frame.
+    #[serde(default = "unit_scale")]
+    pub scale: f64,
+}
+
+fn unit_scale() -> f64 {
+    1.0
 }
 
 impl Default for LceConfig {
@@ -56,6 +65,7 @@ impl Default for LceConfig {
         Self {
             points_per_shape: 50,
             noise: 0.05,
+            scale: 1.0,
         }
     }
 }
@@ -126,19 +136,18 @@ impl LceGenerator {
     }
 
     fn centre(&mut self) -> (f64, f64) {
-        (
-            self.rng.random_range(-0.5..=0.5),
-            self.rng.random_range(-0.5..=0.5),
-        )
+        let h = 0.5 * self.config.scale;
+        (self.rng.random_range(-h..=h), self.rng.random_range(-h..=h))
     }
 
     fn shape_points(&mut self, shape: Shape, m: usize) -> Vec<[f64; 2]> {
         use std::f64::consts::PI;
         let (cx, cy) = self.centre();
+        let scale = self.config.scale;
         let clean: Vec<[f64; 2]> = match shape {
             Shape::Line => {
                 let theta = self.rng.random_range(0.0..PI);
-                let half = self.rng.random_range(0.6..=1.0);
+                let half = scale * self.rng.random_range(0.6..=1.0);
                 (0..m)
                     .map(|_| {
                         let t = self.rng.random_range(-half..=half);
@@ -147,7 +156,7 @@ impl LceGenerator {
                     .collect()
             }
             Shape::Circle => {
-                let r = self.rng.random_range(0.25..=0.6);
+                let r = scale * self.rng.random_range(0.25..=0.6);
                 (0..m)
                     .map(|_| {
                         let a = self.rng.random_range(0.0..2.0 * PI);
@@ -156,7 +165,7 @@ impl LceGenerator {
                     .collect()
             }
             Shape::Ellipse => {
-                let a = self.rng.random_range(0.3..=0.7);
+                let a = scale * self.rng.random_range(0.3..=0.7);
                 let b = a * self.rng.random_range(0.3..=0.7);
                 let rot = self.rng.random_range(0.0..PI);
                 let (s, c) = rot.sin_cos();
@@ -195,8 +204,8 @@ impl LceSample {
             num_models: Some(s.k),
             image_size: None,
             source: Some(format!(
-                "multifit synthetic LCE ({variant:?}, seed {seed}, {} points per shape, noise {}); shapes {:?}",
-                config.points_per_shape, config.noise, self.shapes
+                "multifit synthetic LCE ({variant:?}, seed {seed}, {} points per shape, noise {}, scale {}); shapes {:?}",
+                config.points_per_shape, config.noise, config.scale, self.shapes
             )),
             model_type: None,
             visible: None,
@@ -244,6 +253,7 @@ mod tests {
         let cfg = LceConfig {
             points_per_shape: 40,
             noise: 0.0,
+            scale: 1.0,
         };
         let s = LceGenerator::new(3, cfg)
             .with_shapes(&[Shape::Circle], "c")
@@ -262,5 +272,37 @@ mod tests {
             radii.iter().all(|r| (r - mean).abs() < 0.25 * mean),
             "{radii:?}"
         );
+    }
+
+    #[test]
+    fn scale_stretches_the_shapes_and_not_the_noise() {
+        let at = |scale: f64, noise: f64| {
+            let cfg = LceConfig {
+                points_per_shape: 30,
+                noise,
+                scale,
+            };
+            LceGenerator::new(5, cfg)
+                .sample(LceVariant::Mixed, "s")
+                .sample
+        };
+        // Without noise the same draws give exactly twice the coordinates.
+        let (one, two) = (at(1.0, 0.0), at(2.0, 0.0));
+        assert_eq!(one.labels, two.labels);
+        for i in 0..one.points.len() {
+            for d in 0..2 {
+                let (a, b) = (one.points.row(i)[d], two.points.row(i)[d]);
+                assert!((2.0 * a - b).abs() < 1e-12, "{a} {b}");
+            }
+        }
+        // With noise, the offset from the noiseless point has the same size at both scales.
+        let (noisy1, noisy2) = (at(1.0, 0.05), at(2.0, 0.05));
+        for i in 0..one.points.len() {
+            for d in 0..2 {
+                let e1 = noisy1.points.row(i)[d] - one.points.row(i)[d];
+                let e2 = noisy2.points.row(i)[d] - two.points.row(i)[d];
+                assert!((e1 - e2).abs() < 1e-12, "{e1} {e2}");
+            }
+        }
     }
 }

@@ -474,6 +474,7 @@ mod tests {
         let cfg = LceConfig {
             points_per_shape: 16,
             noise: 0.01,
+            scale: 1.0,
         };
         let mut g = LceGenerator::new(seed, cfg);
         let samples: Vec<Sample> = (0..count)
