@@ -30,8 +30,8 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         [ -d runs/data/lce2-unmixed-train ] || $T gen-lce --out runs/data/lce2-unmixed-train --count 4000 --seed 2 --variant unmixed --scale 2
         [ -d runs/data/lce2-val ] || $T gen-lce --out runs/data/lce2-val --count 100 --seed 3 --variant mixed --scale 2
         $T train --name lce --data runs/data/lce2-train --data runs/data/lce2-unmixed-train --val runs/data/lce2-val \
-          --loss l2 --embed-dim 6 --width 128 --depth 6 --neighbors 16 --graph-neighbors 16 --batch-size 16 --lr 2e-3 --schedule cosine \
-          --epochs ${LCE_EPOCHS:-30} --k-max 6 \
+          --loss l2 --embed-dim 6 --width 128 --depth 12 --neighbors 16 --graph-neighbors 16 --batch-size 16 --lr 2e-3 --schedule cosine \
+          --epochs ${LCE_EPOCHS:-20} --k-max 6 \
           --describe "Synthetic LCE at scale 2: 4000 mixed + 4000 unmixed samples, 50 points per shape, noise 0.05; validation 100 mixed samples (seed 3)" ;;
       *) echo "unknown model $m" >&2; exit 2 ;;
     esac
