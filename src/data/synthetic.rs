@@ -52,12 +52,7 @@ pub struct LceConfig {
     pub points_per_shape: usize,
     pub noise: f64,
     /// Multiplies every shape length (not the noise); 1 is the unit-scale frame.
-    #[serde(default = "unit_scale")]
     pub scale: f64,
-}
-
-fn unit_scale() -> f64 {
-    1.0
 }
 
 impl Default for LceConfig {
