@@ -12,7 +12,7 @@ use multifit::data::synthetic::{LceConfig, LceGenerator, LceVariant};
 use multifit::data::{Kind, Normalization, Sample, Sequence, load_sequences};
 use multifit::loss::Loss;
 use multifit::model::ModelConfig;
-use multifit::registry::{LoadedModel, MetricRecord, TrainingInfo, WEIGHTS_FILE};
+use multifit::registry::{LoadedModel, MetricRecord, ModelCard, TrainingInfo, WEIGHTS_FILE};
 use multifit::train::cv::{self, CvSpec, Protocol};
 use multifit::train::eval::{EvalSettings, evaluate_sample, format_table, totals};
 use multifit::train::{EpochLog, Hooks, Schedule, TrainConfig, prepare, train};
@@ -157,6 +157,10 @@ struct TrainCmd {
     /// Continue from the checkpoint in the run directory.
     #[arg(long)]
     resume: bool,
+    /// Start from the weights of this model directory (same architecture) instead of a seeded
+    /// initialisation: a warm restart that continues an earlier training with a new schedule.
+    #[arg(long)]
+    init: Option<PathBuf>,
     /// What the data is, for the model card.
     #[arg(long, default_value = "")]
     describe: String,
@@ -353,6 +357,11 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
         .points
         .dim();
     let config = a.train.config(input_dim)?;
+    let init = a
+        .init
+        .as_deref()
+        .map(|dir| init_card(dir, &config))
+        .transpose()?;
     let norm = Normalization::for_kind(kind);
     let k = config.model.neighbors;
     let (train_set, val_set) = (
@@ -408,6 +417,7 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
         on_step: Some(&mut on_step),
         checkpoint: Some(&run_dir),
         resume: a.resume,
+        init: init.as_ref().map(|(weights, _)| weights.as_path()),
     };
     let outcome = train(&config, &train_set, &val_set, hooks)?;
     bar.finish_and_clear();
@@ -427,6 +437,16 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
         )
     } else {
         a.describe.clone()
+    };
+    let data = match &init {
+        Some((_, from)) => format!(
+            "{data}; warm-started from {} ({} epochs, {:.0} s), so the total training is {} epochs",
+            from.name,
+            from.training.epochs,
+            from.training.seconds,
+            from.training.epochs + outcome.history.len()
+        ),
+        None => data,
     };
     let info = TrainingInfo {
         data,
@@ -466,6 +486,20 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
         }
     );
     Ok(())
+}
+
+/// The weights file and card of the `--init` model, checked against the architecture to train.
+fn init_card(dir: &Path, config: &TrainConfig) -> Result<(PathBuf, ModelCard)> {
+    let card = ModelCard::read(dir)?;
+    if card.architecture != config.model {
+        bail!(
+            "{}: --init needs the same architecture as the flags give; the model has {:?}, the flags {:?}",
+            dir.display(),
+            card.architecture,
+            config.model
+        );
+    }
+    Ok((dir.join(WEIGHTS_FILE), card))
 }
 
 fn eval_samples(seqs: &[Sequence], input_dim: usize) -> Vec<Sample> {

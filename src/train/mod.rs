@@ -177,13 +177,17 @@ pub struct TrainOutcome {
     pub interrupted: bool,
 }
 
-/// Side channels of a run: a stop flag (Ctrl-C), a per-epoch callback, a checkpoint directory.
+/// Side channels of a run: a stop flag (Ctrl-C), a per-epoch callback, a checkpoint directory,
+/// starting weights.
 pub struct Hooks<'a> {
     pub stop: Option<&'a AtomicBool>,
     pub on_epoch: Option<&'a mut dyn FnMut(&EpochLog)>,
     pub on_step: Option<&'a mut dyn FnMut(usize, usize)>,
     pub checkpoint: Option<&'a Path>,
     pub resume: bool,
+    /// Weights (safetensors of `config.model`) to start from instead of the seeded
+    /// initialisation: a warm restart or fine-tuning. A resumed checkpoint takes precedence.
+    pub init: Option<&'a Path>,
 }
 
 impl Default for Hooks<'_> {
@@ -194,6 +198,7 @@ impl Default for Hooks<'_> {
             on_step: None,
             checkpoint: None,
             resume: false,
+            init: None,
         }
     }
 }
@@ -299,7 +304,10 @@ pub fn train(
     let start = Instant::now();
     let device = cpu_device();
     let ad = device.clone().autodiff();
-    let mut model = config.model.init_seeded(&ad, config.seed)?;
+    let mut model = match hooks.init {
+        Some(path) => EmbeddingNet::load(&config.model, path, &ad)?,
+        None => config.model.init_seeded(&ad, config.seed)?,
+    };
     let mut history: Vec<EpochLog> = Vec::new();
     let mut best_epoch = 0;
     let mut best_score = f64::INFINITY;
@@ -575,6 +583,62 @@ mod tests {
         assert!(matches!(
             train(&other, &train_set, &[], hooks),
             Err(TrainError::Checkpoint { .. })
+        ));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn init_starts_from_given_weights_and_rejects_other_shapes() {
+        let train_set = two_lines(4, 6);
+        let dir = std::env::temp_dir().join(format!("multifit-init-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let weights = dir.join("w.safetensors");
+        let cfg = tiny_config(Loss::L2);
+        let first = train(&cfg, &train_set, &[], Hooks::default()).unwrap();
+        first.net.save(&weights).unwrap();
+        // One epoch at a negligible learning rate from those weights leaves them as they were,
+        // unlike the same epoch from the seeded initialisation.
+        let still = TrainConfig {
+            learning_rate: 1e-12,
+            epochs: 1,
+            ..cfg.clone()
+        };
+        let hooks = Hooks {
+            init: Some(&weights),
+            ..Hooks::default()
+        };
+        let warm = train(&still, &train_set, &[], hooks).unwrap();
+        let cold = train(&still, &train_set, &[], Hooks::default()).unwrap();
+        let device = cpu_device();
+        let x = &train_set[0].input;
+        let (a, w, c) = (
+            first.net.embed(x, 2, &device),
+            warm.net.embed(x, 2, &device),
+            cold.net.embed(x, 2, &device),
+        );
+        let gap = |p: &[f32], q: &[f32]| {
+            p.iter()
+                .zip(q)
+                .map(|(u, v)| (u - v).abs())
+                .fold(0.0f32, f32::max)
+        };
+        assert!(gap(&a, &w) < 1e-5, "warm start moved by {}", gap(&a, &w));
+        assert!(gap(&a, &c) > 1e-2, "cold start equals the trained net");
+        // Weights of another width are refused, not silently reshaped.
+        let wider = TrainConfig {
+            model: ModelConfig {
+                width: 8,
+                ..cfg.model.clone()
+            },
+            ..still
+        };
+        let hooks = Hooks {
+            init: Some(&weights),
+            ..Hooks::default()
+        };
+        assert!(matches!(
+            train(&wider, &train_set, &[], hooks),
+            Err(TrainError::Model(_))
         ));
         std::fs::remove_dir_all(&dir).unwrap();
     }
