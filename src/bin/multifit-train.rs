@@ -439,12 +439,10 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
         a.describe.clone()
     };
     let data = match &init {
+        // The parent's own description nests, so a chain of warm restarts reads whole.
         Some((_, from)) => format!(
-            "{data}; warm-started from {} ({} epochs, {:.0} s), so the total training is {} epochs",
-            from.name,
-            from.training.epochs,
-            from.training.seconds,
-            from.training.epochs + outcome.history.len()
+            "{data}; warm-started from the model {} ({} epochs, {:.0} s; its data: {})",
+            from.name, from.training.epochs, from.training.seconds, from.training.data
         ),
         None => data,
     };
