@@ -39,23 +39,24 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         gen lce2-unmixed-train-d --count 16000 --seed 32 --variant unmixed
         gen lce2-train-e --count 12000 --seed 41 --variant mixed
         gen lce2-unmixed-train-e --count 12000 --seed 42 --variant unmixed
+        common="50 points per shape, noise 0.05; validation 100 mixed samples (seed 3)"
         net="--loss l2 --embed-dim 6 --width 128 --depth 12 --neighbors 16 --graph-neighbors 16 --batch-size 16 --schedule cosine --k-max 6"
         $T train --name lce --out runs/lce-stage1/model --run-dir runs/lce-stage1 \
           --data runs/data/lce2-train --data runs/data/lce2-unmixed-train --val runs/data/lce2-val \
           $net --lr 2e-3 --epochs ${LCE_EPOCHS:-20} \
-          --describe "Synthetic LCE at scale 2: 4000 mixed + 4000 unmixed samples, 50 points per shape, noise 0.05; validation 100 mixed samples (seed 3)"
+          --describe "Synthetic LCE at scale 2: 4000 mixed + 4000 unmixed samples, $common"
         $T train --name lce --init runs/lce-stage1/model --out runs/lce-stage2/model --run-dir runs/lce-stage2 \
           --data runs/data/lce2-train --data runs/data/lce2-unmixed-train --data runs/data/lce2-train-c --data runs/data/lce2-unmixed-train-c \
           --val runs/data/lce2-val $net --lr 1e-3 --epochs 4 --seed 1 \
-          --describe "Synthetic LCE at scale 2: 24000 mixed + 24000 unmixed samples (seeds 1, 21 and 2, 22), 50 points per shape, noise 0.05; validation 100 mixed samples (seed 3)"
+          --describe "Synthetic LCE at scale 2: 24000 mixed + 24000 unmixed samples (seeds 1, 21 and 2, 22), $common"
         $T train --name lce --init runs/lce-stage2/model --out runs/lce-stage3/model --run-dir runs/lce-stage3 \
           --data runs/data/lce2-train-d --data runs/data/lce2-unmixed-train-d \
           --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed 2 \
-          --describe "Synthetic LCE at scale 2: 16000 new mixed + 16000 new unmixed samples (seeds 31, 32), 50 points per shape, noise 0.05; validation 100 mixed samples (seed 3)"
+          --describe "Synthetic LCE at scale 2: 16000 new mixed + 16000 new unmixed samples (seeds 31, 32), $common"
         $T train --name lce --init runs/lce-stage3/model --run-dir runs/lce-stage4 \
           --data runs/data/lce2-train-e --data runs/data/lce2-unmixed-train-e \
           --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed 3 \
-          --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds 41, 42), 50 points per shape, noise 0.05; validation 100 mixed samples (seed 3)" ;;
+          --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds 41, 42), $common" ;;
       *) echo "unknown model $m" >&2; exit 2 ;;
     esac
   done

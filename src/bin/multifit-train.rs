@@ -303,12 +303,7 @@ fn gen_lce(a: GenLceArgs) -> Result<()> {
         noise: a.noise,
         scale: a.scale,
     };
-    if config.points_per_shape < 2 || !(config.noise.is_finite() && config.noise >= 0.0) {
-        bail!("points per shape must be at least 2 and noise finite and non-negative");
-    }
-    if !(config.scale.is_finite() && config.scale > 0.0) {
-        bail!("scale must be finite and positive");
-    }
+    config.validate().map_err(anyhow::Error::msg)?;
     let variant = match a.variant {
         VariantArg::Mixed => LceVariant::Mixed,
         VariantArg::Unmixed => LceVariant::Unmixed,

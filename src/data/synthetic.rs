@@ -55,6 +55,21 @@ pub struct LceConfig {
     pub scale: f64,
 }
 
+impl LceConfig {
+    /// Checks the settings a generator can draw from.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.points_per_shape < 2 || !(self.noise.is_finite() && self.noise >= 0.0) {
+            return Err(
+                "points per shape must be at least 2 and noise finite and non-negative".into(),
+            );
+        }
+        if !(self.scale.is_finite() && self.scale > 0.0) {
+            return Err("scale must be finite and positive".into());
+        }
+        Ok(())
+    }
+}
+
 impl Default for LceConfig {
     fn default() -> Self {
         Self {
@@ -267,6 +282,35 @@ mod tests {
             radii.iter().all(|r| (r - mean).abs() < 0.25 * mean),
             "{radii:?}"
         );
+    }
+
+    #[test]
+    fn validate_rejects_settings_it_cannot_draw_from() {
+        assert!(LceConfig::default().validate().is_ok());
+        for bad in [
+            LceConfig {
+                points_per_shape: 1,
+                ..LceConfig::default()
+            },
+            LceConfig {
+                noise: f64::NAN,
+                ..LceConfig::default()
+            },
+            LceConfig {
+                noise: -0.1,
+                ..LceConfig::default()
+            },
+            LceConfig {
+                scale: 0.0,
+                ..LceConfig::default()
+            },
+            LceConfig {
+                scale: f64::INFINITY,
+                ..LceConfig::default()
+            },
+        ] {
+            assert!(bad.validate().is_err(), "{bad:?}");
+        }
     }
 
     #[test]

@@ -304,10 +304,7 @@ pub fn train(
     let start = Instant::now();
     let device = cpu_device();
     let ad = device.clone().autodiff();
-    let mut model = match hooks.init {
-        Some(path) => EmbeddingNet::load(&config.model, path, &ad)?,
-        None => config.model.init_seeded(&ad, config.seed)?,
-    };
+    let mut model = None;
     let mut history: Vec<EpochLog> = Vec::new();
     let mut best_epoch = 0;
     let mut best_score = f64::INFINITY;
@@ -327,7 +324,7 @@ pub fn train(
                     "the checkpoint was made with a different config",
                 ));
             }
-            model = EmbeddingNet::load(&config.model, &dir.join(LAST), &ad)?;
+            model = Some(EmbeddingNet::load(&config.model, &dir.join(LAST), &ad)?);
             best = Some(EmbeddingNet::load(&config.model, &dir.join(BEST), &device)?);
             first_epoch = state.history.len();
             history = state.history;
@@ -335,6 +332,12 @@ pub fn train(
             best_score = state.best_score;
         }
     }
+    // Without a checkpoint to resume: the given weights, else the seeded initialisation.
+    let mut model = match (model, hooks.init) {
+        (Some(resumed), _) => resumed,
+        (None, Some(path)) => EmbeddingNet::load(&config.model, path, &ad)?,
+        (None, None) => config.model.init_seeded(&ad, config.seed)?,
+    };
 
     let mut optim = AdamConfig::new().with_epsilon(1e-8).init();
     let noise = Normal::new(0.0, config.jitter.max(0.0)).expect("finite sigma");
