@@ -10,7 +10,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::cluster::{self, ClusterError, ClusterParams, Clustering, Points, Selection};
 use crate::data::features::with_neighbors;
-use crate::data::{ImageSize, Kind, Normalization, PointSet};
+use crate::data::symmetry::{self, closure};
+use crate::data::{ImageSize, Kind, Normalization, PointSet, Symmetry};
 use crate::loss::Loss;
 use crate::model::{EmbeddingNet, FusedNet, ModelConfig, ModelError, cpu_device};
 use crate::threads::Threads;
@@ -58,6 +59,11 @@ pub struct ModelCard {
     /// Default K selection (`sod` or `silhouette`).
     pub selection: Selection,
     pub training: TrainingInfo,
+    /// Test-time symmetries: the input's images under every combination of these are embedded
+    /// too, and each point's embeddings are concatenated (scaled to unit length) before
+    /// clustering. Empty: the input alone, as in the paper.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub test_symmetries: Vec<Symmetry>,
     #[serde(default)]
     pub metrics: Vec<MetricRecord>,
     /// multifit version and git commit that trained it.
@@ -122,6 +128,8 @@ impl ModelCard {
         if matches!(self.selection, Selection::Fixed(_)) {
             return Err("the default selection must be sod or silhouette".into());
         }
+        symmetry::check(&self.test_symmetries, self.kind)
+            .map_err(|e| format!("test_symmetries: {e}"))?;
         self.architecture.validate().map_err(|e| e.to_string())
     }
 
@@ -276,23 +284,72 @@ impl LoadedModel {
         self.fused.forward(features, &self.threads)
     }
 
-    /// Normalise, embed and cluster one point set.
+    /// Width of the embeddings a fit with test symmetries `symmetries` clusters: `e` times the
+    /// number of inputs embedded (the input and its images).
+    pub fn fit_dim(&self, symmetries: &[Symmetry]) -> usize {
+        let kind = self.card.kind;
+        let copies = closure(vec![()], symmetries, |s, _| {
+            s.applies_to(kind).then_some(())
+        });
+        self.card.architecture.embed_dim * copies.len()
+    }
+
+    /// The embeddings a fit clusters: `points` `[n, d]` -> `[n, fit_dim]`. With test symmetries,
+    /// row i holds the embeddings of point i in the input and in each image, side by side,
+    /// divided by the square root of their number so that it keeps unit length.
+    fn fit_embeddings(
+        &self,
+        points: &PointSet,
+        image: Option<ImageSize>,
+        symmetries: &[Symmetry],
+    ) -> Result<Vec<f32>, FitError> {
+        let first = self.embed(&self.prepare(points, image)?);
+        if symmetries.is_empty() {
+            return Ok(first);
+        }
+        let e = self.card.architecture.embed_dim;
+        let images = closure(vec![points.clone()], symmetries, |s, p| {
+            s.apply_points(p, image)
+        });
+        let mut all = vec![first];
+        for p in &images[1..] {
+            all.push(self.embed(&self.prepare(p, image)?));
+        }
+        let scale = 1.0 / (all.len() as f32).sqrt();
+        Ok((0..points.len())
+            .flat_map(|i| all.iter().flat_map(move |z| &z[i * e..(i + 1) * e]))
+            .map(|v| v * scale)
+            .collect())
+    }
+
+    /// Normalise, embed (with the card's test symmetries) and cluster one point set.
     pub fn fit(
         &self,
         points: &PointSet,
         image: Option<ImageSize>,
         params: &ClusterParams,
     ) -> Result<FitOutcome, FitError> {
+        self.fit_with(points, image, params, &self.card.test_symmetries)
+    }
+
+    /// [`LoadedModel::fit`] with the given test symmetries instead of the card's (`&[]`: the
+    /// input alone, one forward pass).
+    pub fn fit_with(
+        &self,
+        points: &PointSet,
+        image: Option<ImageSize>,
+        params: &ClusterParams,
+        symmetries: &[Symmetry],
+    ) -> Result<FitOutcome, FitError> {
         if let Selection::Fixed(k) = params.selection()
             && k > points.len()
         {
             return Err(ClusterError::KOutOfRange { k, n: points.len() }.into());
         }
-        let input = self.prepare(points, image)?;
         let t0 = Instant::now();
-        let embeddings = self.embed(&input);
+        let embeddings = self.fit_embeddings(points, image, symmetries)?;
         let t1 = Instant::now();
-        let e = self.card.architecture.embed_dim;
+        let e = self.fit_dim(symmetries);
         let clustering = cluster::cluster_on(Points::new(&embeddings, e)?, params, &self.threads)?;
         let t2 = Instant::now();
         Ok(FitOutcome {
@@ -331,4 +388,120 @@ pub fn load_all(root: &Path) -> Result<BTreeMap<String, LoadedModel>, RegistryEr
         });
     }
     Ok(models)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::train::cv::card_for;
+    use crate::train::{Schedule, TrainConfig};
+
+    fn tiny(symmetries: Vec<Symmetry>) -> LoadedModel {
+        let model = ModelConfig {
+            input_dim: 4,
+            width: 8,
+            depth: 1,
+            embed_dim: 3,
+            batch_norm: false,
+            cn_epsilon: 1e-3,
+            neighbors: 0,
+            graph_neighbors: 0,
+        };
+        let device = cpu_device();
+        let net = model.init_seeded(&device, 7).unwrap();
+        let config = TrainConfig {
+            model,
+            loss: Loss::L2,
+            learning_rate: 1e-3,
+            schedule: Schedule::Constant,
+            epochs: 1,
+            seed: 0,
+            batch_size: 1,
+            jitter: 0.0,
+        };
+        let info = TrainingInfo {
+            data: String::new(),
+            command: String::new(),
+            epochs: 1,
+            learning_rate: 1e-3,
+            seed: 0,
+            seconds: 0.0,
+            machine: String::new(),
+        };
+        let mut card = card_for("tiny", Kind::Trajectories, &config, 4, info);
+        card.test_symmetries = symmetries;
+        card.validate().unwrap();
+        LoadedModel::from_parts(card, net, device).unwrap()
+    }
+
+    #[test]
+    fn test_symmetries_concatenate_unit_embeddings_of_every_image() {
+        let values = (0..40).map(|v| ((v * 7) % 13) as f64).collect();
+        let points = PointSet::from_flat(Kind::Trajectories, 4, values).unwrap();
+        let image = Some(ImageSize::new(20.0, 20.0).unwrap());
+        let params = ClusterParams::builder()
+            .selection(Selection::Fixed(2))
+            .seed(1)
+            .build()
+            .unwrap();
+        let plain = tiny(vec![]);
+        let both = tiny(vec![Symmetry::Mirror, Symmetry::Reverse]);
+        let sym = [Symmetry::Mirror, Symmetry::Reverse];
+        assert_eq!(plain.fit_dim(&[]), 3);
+        assert_eq!(both.fit_dim(&sym), 12);
+        assert_eq!(both.fit_dim(&[Symmetry::Rotate]), 12);
+        let a = plain.fit(&points, image, &params).unwrap();
+        let b = both.fit(&points, image, &params).unwrap();
+        assert_eq!((a.embed_dim, b.embed_dim), (3, 12));
+        assert_eq!(b.embeddings.len(), 12 * points.len());
+        assert_eq!(b.clustering.labels.len(), points.len());
+        // Row i: [input, mirrored, reversed, mirrored and reversed] embeddings of point i, / 2.
+        let image_of = |ss: &[Symmetry]| {
+            let p = ss
+                .iter()
+                .fold(points.clone(), |p, s| s.apply_points(&p, image).unwrap());
+            plain.fit(&p, image, &params).unwrap().embeddings
+        };
+        let blocks = [
+            a.embeddings.clone(),
+            image_of(&[Symmetry::Mirror]),
+            image_of(&[Symmetry::Reverse]),
+            image_of(&[Symmetry::Mirror, Symmetry::Reverse]),
+        ];
+        for i in 0..points.len() {
+            let row = &b.embeddings[i * 12..(i + 1) * 12];
+            let norm = row.iter().map(|v| v * v).sum::<f32>().sqrt();
+            assert!((norm - 1.0).abs() < 1e-4, "row {i} has norm {norm}");
+            for (c, block) in blocks.iter().enumerate() {
+                for j in 0..3 {
+                    let want = block[i * 3 + j] / 2.0;
+                    assert!((row[c * 3 + j] - want).abs() < 1e-6, "row {i} block {c}");
+                }
+            }
+        }
+        // The mirrored input's own block differs from the input's: the images are real inputs.
+        assert!((0..3).any(|j| (blocks[0][j] - blocks[1][j]).abs() > 1e-4));
+        // Without symmetries the same model embeds the input alone.
+        let alone = both.fit_with(&points, image, &params, &[]).unwrap();
+        assert_eq!(alone.embeddings, a.embeddings);
+    }
+
+    #[test]
+    fn cards_refuse_symmetries_that_do_not_apply() {
+        let mut card = tiny(vec![]).card;
+        card.test_symmetries = vec![Symmetry::Mirror, Symmetry::Mirror];
+        assert!(card.validate().unwrap_err().contains("repeated"));
+        card.kind = Kind::Points2d;
+        card.input_dim = 2;
+        card.architecture.input_dim = 2;
+        card.normalization = Normalization::for_kind(Kind::Points2d);
+        card.test_symmetries = vec![Symmetry::Reverse];
+        assert!(
+            card.validate()
+                .unwrap_err()
+                .contains("does not apply to points2d")
+        );
+        card.test_symmetries = vec![Symmetry::Mirror];
+        card.validate().unwrap();
+    }
 }

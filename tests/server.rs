@@ -152,6 +152,51 @@ fn fits_a_generated_lce_sample_invariant_to_scale() {
         )
         .json();
     assert_eq!(error_rate(&labels(&v), &labels(&w)), 0.0);
+
+    // The shipped lce embeds the input and its images under its card's test symmetries (the
+    // dihedral group of the square: mirror x quarter turns, 8 images) and clusters the
+    // concatenated embeddings; `test_symmetries: false` embeds the input alone.
+    let card = server.get("/v1/models/lce").json();
+    let e = card["architecture"]["embed_dim"].as_u64().unwrap() as usize;
+    let images: usize = card["test_symmetries"]
+        .as_array()
+        .expect("lce ships with test symmetries")
+        .iter()
+        .map(|s| match s.as_str().unwrap() {
+            "mirror" => 2,
+            "rotate" => 4,
+            other => panic!("unexpected symmetry {other} for points2d"),
+        })
+        .product();
+    assert!(images > 1);
+    for (flag, width) in [
+        (json!(null), e * images),
+        (json!(true), e * images),
+        (json!(false), e),
+    ] {
+        let body = json!({"kind": "points2d", "points": rows, "k": 4,
+                          "return_embeddings": true, "test_symmetries": flag});
+        let r = server.post_json("/v1/fit", &body);
+        assert_eq!(r.status, 200, "{}", r.text());
+        let z = r.json();
+        check_fit(&z, rows.len());
+        for row in z["embeddings"].as_array().unwrap() {
+            let row: Vec<f64> = row
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect();
+            assert_eq!(row.len(), width, "test_symmetries {flag}");
+            let norm = row.iter().map(|x| x * x).sum::<f64>().sqrt();
+            assert!((norm - 1.0).abs() < 1e-3, "unit rows, got {norm}");
+        }
+    }
+    let bad = server.post_json(
+        "/v1/fit",
+        &json!({"kind": "points2d", "points": rows, "test_symmetries": "yes"}),
+    );
+    assert_eq!(bad.status, 422, "{}", bad.text());
 }
 
 #[test]

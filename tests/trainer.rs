@@ -89,6 +89,64 @@ fn gen_lce_writes_readable_samples() {
 }
 
 #[test]
+fn overlapping_clips_and_symmetries_multiply_the_training_set() {
+    let names = ["Seq028_Clip02", "Seq070_Clip01"];
+    let data = subset("kt-sym", "kt3dmoseg", &names);
+    // Every 5-frame clip with at least two visible tracks, counted by the library itself.
+    let clips: usize = names
+        .iter()
+        .map(|n| {
+            multifit::data::Sequence::load(&data.join(format!("{n}.json")))
+                .unwrap()
+                .clips(5, 1)
+                .len()
+        })
+        .sum();
+    assert!(clips > 2 * names.len(), "sliding clips: {clips}");
+    let out = temp("kt-sym-model");
+    let run_dir = temp("kt-sym-run");
+    let mut args = vec![
+        "train",
+        "--name",
+        "tiny-kt-sym",
+        "--data",
+        s(&data),
+        "--protocol",
+        "augment",
+        "--clip-stride",
+        "1",
+        "--symmetry",
+        "mirror,reverse",
+        "--out",
+        s(&out),
+        "--run-dir",
+        s(&run_dir),
+    ];
+    args.extend(TINY);
+    ok(&args);
+    let card: Value =
+        serde_json::from_slice(&std::fs::read(out.join("model.json")).unwrap()).unwrap();
+    let described = card["training"]["data"].as_str().unwrap();
+    assert!(
+        described.contains(&format!("{} training samples", 4 * clips))
+            && described.contains("clips every 1 frames")
+            && described.contains("Mirror, Reverse"),
+        "{described}"
+    );
+    // A stride of 0 is refused with a message, before any training.
+    let mut bad = args.clone();
+    let at = bad.iter().position(|a| *a == "--clip-stride").unwrap();
+    bad[at + 1] = "0";
+    let out = run(&bad);
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("clip stride must be at least 1"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
 fn train_then_eval_on_kt3dmoseg_clips() {
     let data = subset(
         "kt",

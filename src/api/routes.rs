@@ -227,7 +227,14 @@ async fn run_fit(state: &AppState, job: FitJob) -> Result<FitResponse, ApiError>
         // If the client goes away while queued, this future is dropped and the fit never runs.
         let handle = tokio::task::spawn_blocking(move || {
             let _permit = permit;
-            let outcome = job.model.fit(&job.points, job.image_size, &job.params);
+            let symmetries: &[_] = if job.test_symmetries {
+                &job.model.card.test_symmetries
+            } else {
+                &[]
+            };
+            let outcome = job
+                .model
+                .fit_with(&job.points, job.image_size, &job.params, symmetries);
             (job, outcome)
         });
         let (job, outcome) = handle

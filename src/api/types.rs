@@ -42,6 +42,9 @@ pub struct FitRequest {
     pub seed: Option<u64>,
     #[serde(default)]
     pub return_embeddings: Option<bool>,
+    /// False: embed the input alone, skipping the model's test-time symmetries.
+    #[serde(default)]
+    pub test_symmetries: Option<bool>,
 }
 
 /// `POST /v1/fit/batch` body as sent; entries are parsed one by one so that a bad entry gets
@@ -60,6 +63,8 @@ pub struct FitJob {
     pub image_size: Option<ImageSize>,
     pub params: ClusterParams,
     pub return_embeddings: bool,
+    /// Whether the fit uses the card's test-time symmetries.
+    pub test_symmetries: bool,
 }
 
 /// The shipped model used for a kind when the request names none: the first (by name) whose
@@ -189,6 +194,7 @@ impl FitRequest {
             image_size,
             params,
             return_embeddings: self.return_embeddings.unwrap_or(false),
+            test_symmetries: self.test_symmetries.unwrap_or(true),
         })
     }
 }

@@ -9,11 +9,11 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use multifit::data::synthetic::{LceConfig, LceGenerator, LceVariant};
-use multifit::data::{Kind, Normalization, Sample, Sequence, load_sequences};
+use multifit::data::{Kind, Normalization, Sample, Sequence, Symmetry, load_sequences};
 use multifit::loss::Loss;
 use multifit::model::ModelConfig;
 use multifit::registry::{LoadedModel, MetricRecord, ModelCard, TrainingInfo, WEIGHTS_FILE};
-use multifit::train::cv::{self, CvSpec, Protocol};
+use multifit::train::cv::{self, CvSpec, Protocol, SamplePlan};
 use multifit::train::eval::{EvalSettings, evaluate_sample, format_table, totals};
 use multifit::train::{EpochLog, Hooks, Schedule, TrainConfig, prepare, train};
 
@@ -125,6 +125,18 @@ struct TrainArgs {
     /// Protocol for trajectory data: vanilla (first clip) or augment (all non-overlapping clips).
     #[arg(long, value_enum, default_value = "vanilla")]
     protocol: Protocol,
+    /// Augment protocol: frames between the starts of two clips (default: the clip length, the
+    /// paper's non-overlapping clips; 1 = every clip).
+    #[arg(long)]
+    clip_stride: Option<usize>,
+    /// Add the images of every training sample under these symmetries (comma-separated:
+    /// mirror, reverse); every combination is added, so two give four copies.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    symmetry: Vec<Symmetry>,
+    /// Test-time symmetries stored in the card: fits embed the input and its images under these
+    /// (comma-separated: mirror, reverse) and cluster the concatenated embeddings.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    test_symmetry: Vec<Symmetry>,
     /// Largest K for automatic selection (stored in the card).
     #[arg(long, default_value_t = 8)]
     k_max: usize,
@@ -185,6 +197,10 @@ struct EvalCmd {
     /// Record the known-K mean error in the model card under this metric name.
     #[arg(long)]
     record: Option<String>,
+    /// Evaluate with these test-time symmetries instead of the card's (comma-separated: mirror,
+    /// reverse; the flag alone: none).
+    #[arg(long, value_enum, value_delimiter = ',', num_args = 0..)]
+    test_symmetry: Option<Vec<Symmetry>>,
 }
 
 #[derive(Args, Debug)]
@@ -209,6 +225,17 @@ struct CvCmd {
 }
 
 impl TrainArgs {
+    fn samples(&self, clip_len: usize) -> Result<SamplePlan> {
+        let plan = SamplePlan {
+            protocol: self.protocol,
+            clip_len,
+            clip_stride: self.clip_stride.unwrap_or(clip_len),
+            symmetries: self.symmetry.clone(),
+        };
+        plan.validate()?;
+        Ok(plan)
+    }
+
     fn config(&self, input_dim: usize) -> Result<TrainConfig> {
         let loss = Loss::parse(&self.loss, self.alpha)
             .with_context(|| format!("unknown loss {:?} (l2, ce, mimi)", self.loss))?;
@@ -326,23 +353,15 @@ fn gen_lce(a: GenLceArgs) -> Result<()> {
     Ok(())
 }
 
-/// Training samples of a sequence list under a protocol.
-fn samples_of(seqs: &[Sequence], protocol: Protocol, clip_len: usize) -> Vec<Sample> {
-    seqs.iter()
-        .flat_map(|s| cv::train_samples(s, protocol, clip_len))
-        .collect()
-}
-
 fn train_cmd(a: TrainCmd) -> Result<()> {
     let seqs = a.data.sequences()?;
     let kind = seqs[0].points.kind();
-    let train_samples = samples_of(&seqs, a.train.protocol, a.data.clip_len);
+    let plan = a.train.samples(a.data.clip_len)?;
+    let train_samples: Vec<Sample> = seqs.iter().flat_map(|s| plan.train_samples(s)).collect();
     let val_samples = match &a.val {
         Some(p) => {
             let vs = load_sequences(p, a.data.model_type.as_deref())?;
-            vs.iter()
-                .filter_map(|s| cv::test_sample(s, a.data.clip_len))
-                .collect()
+            vs.iter().filter_map(|s| plan.test_sample(s)).collect()
         }
         None => vec![],
     };
@@ -352,6 +371,7 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
         .points
         .dim();
     let config = a.train.config(input_dim)?;
+    check_symmetries(&a.train.test_symmetry, kind)?;
     let init = a
         .init
         .as_deref()
@@ -418,7 +438,7 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
     bar.finish_and_clear();
     let data = if a.describe.is_empty() {
         format!(
-            "{} ({} sequences, {} training samples, protocol {:?}, clip {} frames)",
+            "{} ({} sequences, {} training samples, {})",
             a.data
                 .data
                 .iter()
@@ -427,8 +447,7 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
                 .join(", "),
             seqs.len(),
             train_set.len(),
-            a.train.protocol,
-            a.data.clip_len
+            plan.describe()
         )
     } else {
         a.describe.clone()
@@ -451,6 +470,7 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
         machine: machine(),
     };
     let mut card = cv::card_for(&a.name, kind, &config, a.train.k_max, info);
+    card.test_symmetries = a.train.test_symmetry.clone();
     card.git_commit = git_commit();
     if let Some(v) = outcome.best_val_error {
         card.metrics.push(MetricRecord {
@@ -505,7 +525,11 @@ fn eval_samples(seqs: &[Sequence], input_dim: usize) -> Vec<Sample> {
 }
 
 fn eval_cmd(a: EvalCmd) -> Result<()> {
-    let model = LoadedModel::load(&a.model)?;
+    let mut model = LoadedModel::load(&a.model)?;
+    if let Some(list) = a.test_symmetry {
+        check_symmetries(&list, model.card.kind)?;
+        model.card.test_symmetries = list;
+    }
     let seqs = a.data.sequences()?;
     let samples = eval_samples(&seqs, model.card.input_dim);
     let settings = EvalSettings {
@@ -562,14 +586,17 @@ fn eval_cmd(a: EvalCmd) -> Result<()> {
 
 fn cv_cmd(a: CvCmd) -> Result<()> {
     let seqs = a.data.sequences()?;
-    let input_dim = cv::test_sample(&seqs[0], a.data.clip_len)
+    let samples = a.train.samples(a.data.clip_len)?;
+    let input_dim = samples
+        .test_sample(&seqs[0])
         .context("no test sample")?
         .points
         .dim();
+    check_symmetries(&a.train.test_symmetry, seqs[0].points.kind())?;
     let spec = CvSpec {
         train: a.train.config(input_dim)?,
-        protocol: a.train.protocol,
-        clip_len: a.data.clip_len,
+        samples,
+        test_symmetries: a.train.test_symmetry.clone(),
         eval: EvalSettings {
             k_max: a.train.k_max,
             restarts: a.restarts,
@@ -581,7 +608,7 @@ fn cv_cmd(a: CvCmd) -> Result<()> {
     std::fs::write(
         a.out.join("spec.json"),
         serde_json::to_string_pretty(&serde_json::json!({
-            "command": command_line(), "train": spec.train, "protocol": spec.protocol, "clip_len": spec.clip_len,
+            "command": command_line(), "train": spec.train, "samples": spec.samples,
         }))?,
     )?;
     let names: Vec<String> = seqs.iter().map(|s| s.name.clone()).collect();
@@ -648,6 +675,10 @@ fn cv_cmd(a: CvCmd) -> Result<()> {
         println!("training time, all folds: {train_seconds:.0} s");
     }
     Ok(())
+}
+
+fn check_symmetries(list: &[Symmetry], kind: Kind) -> Result<()> {
+    multifit::data::symmetry::check(list, kind).map_err(|e| anyhow::anyhow!("--test-symmetry: {e}"))
 }
 
 /// Removes `flag VALUE` pairs (the `--flag=VALUE` form is removed by the caller's filter).

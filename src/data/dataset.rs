@@ -180,11 +180,15 @@ impl Sequence {
         })
     }
 
-    /// Non-overlapping clips of `len` frames starting at frame 0, then `len`, `2 len`, ...
-    /// (the paper's 'Augment' setting; the first is the test clip).
-    pub fn clips(&self, len: usize) -> Vec<Sample> {
-        (0..self.frames() / len.max(1))
-            .filter_map(|c| self.clip(c * len, len))
+    /// Clips of `len` frames starting at frame 0, then `stride`, `2 stride`, ... while they fit.
+    /// `stride = len` gives the non-overlapping clips of the paper's 'Augment' setting; the first
+    /// clip is always the test clip.
+    pub fn clips(&self, len: usize, stride: usize) -> Vec<Sample> {
+        let (len, stride) = (len.max(1), stride.max(1));
+        (0..)
+            .map(|c| c * stride)
+            .take_while(|start| start + len <= self.frames())
+            .filter_map(|start| self.clip(start, len))
             .collect()
     }
 }
@@ -274,7 +278,17 @@ mod tests {
         assert_eq!(second.points.row(0), &[4.0, 5.0, 6.0, 7.0]);
         assert_eq!(second.k, 2);
         assert!(seq.clip(3, 2).is_none());
-        assert_eq!(seq.clips(2).len(), 2);
+        assert_eq!(seq.clips(2, 2).len(), 2);
+        // Overlapping clips: starts 0, 1, 2 of 4 frames.
+        let sliding = seq.clips(2, 1);
+        assert_eq!(sliding.len(), 3);
+        assert_eq!(sliding[1].points.row(0), &[2.0, 3.0, 4.0, 5.0]);
+        assert_eq!(
+            sliding[1].points.len(),
+            2,
+            "point 2 is invisible in frame 3"
+        );
+        assert_eq!(seq.clips(3, 3).len(), 1);
     }
 
     #[test]

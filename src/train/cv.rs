@@ -3,9 +3,12 @@
 //! For each sequence: train on the others, test on it. Trajectory sequences are cut into clips
 //! of `clip_len` frames: the test clip is frames 1..clip_len of the held-out sequence; 'vanilla'
 //! trains on the first clip of every other sequence, 'augment' on every non-overlapping clip of
-//! every other sequence. No clip of the held-out sequence is ever seen in training.
+//! every other sequence (or, with a smaller clip stride, overlapping ones), and training samples may
+//! be multiplied by structure-preserving symmetries ([`SamplePlan`]). No clip of the held-out
+//! sequence is ever seen in training.
 //! Correspondence sequences are used whole. Each finished fold is written to
-//! `<out>/folds/<name>.json` and is not retrained when the run is restarted.
+//! `<out>/folds/<name>.json`, its model to `<out>/models/<name>/`, and is not retrained when the
+//! run is restarted.
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
@@ -13,9 +16,9 @@ use std::process::{Child, Command};
 use serde::{Deserialize, Serialize};
 
 use super::eval::{EvalRow, EvalSettings, evaluate_sample};
-use super::{Hooks, TrainConfig, TrainError, prepare, train};
-use crate::data::{Kind, Normalization, Sample, Sequence};
-use crate::registry::{LoadedModel, ModelCard, TrainingInfo};
+use super::{Hooks, TrainConfig, TrainError, checkpoint_err, prepare, train};
+use crate::data::{Kind, Normalization, Sample, Sequence, Symmetry, with_symmetries};
+use crate::registry::{LoadedModel, ModelCard, TrainingInfo, WEIGHTS_FILE};
 
 /// Which training clips a fold uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -36,20 +39,74 @@ pub struct FoldResult {
     pub best_epoch: usize,
 }
 
-/// The test sample of a sequence.
-pub fn test_sample(seq: &Sequence, clip_len: usize) -> Option<Sample> {
-    match seq.points.kind() {
-        Kind::Trajectories => seq.clip(0, clip_len),
-        _ => Some(seq.sample()),
-    }
+/// How a sequence becomes a test sample and training samples.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SamplePlan {
+    pub protocol: Protocol,
+    /// Frames per trajectory clip (the paper: 5).
+    pub clip_len: usize,
+    /// Frames between the starts of two 'augment' clips: `clip_len` gives the paper's
+    /// non-overlapping clips, less gives overlapping ones.
+    pub clip_stride: usize,
+    /// Structure-preserving images added to the training samples (none in the paper).
+    pub symmetries: Vec<Symmetry>,
 }
 
-/// The training samples a sequence contributes to the folds that do not hold it out.
-pub fn train_samples(seq: &Sequence, protocol: Protocol, clip_len: usize) -> Vec<Sample> {
-    match (seq.points.kind(), protocol) {
-        (Kind::Trajectories, Protocol::Vanilla) => seq.clip(0, clip_len).into_iter().collect(),
-        (Kind::Trajectories, Protocol::Augment) => seq.clips(clip_len),
-        _ => vec![seq.sample()],
+impl SamplePlan {
+    /// The paper's plan: `protocol` with non-overlapping clips of `clip_len` frames.
+    pub fn paper(protocol: Protocol, clip_len: usize) -> Self {
+        Self {
+            protocol,
+            clip_len,
+            clip_stride: clip_len,
+            symmetries: vec![],
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), TrainError> {
+        if self.clip_len < 2 {
+            return Err(TrainError::Config("clips need at least 2 frames".into()));
+        }
+        if self.clip_stride == 0 {
+            return Err(TrainError::Config("clip stride must be at least 1".into()));
+        }
+        Ok(())
+    }
+
+    /// The test sample of a sequence: frames 1..clip_len of a trajectory sequence, a
+    /// correspondence sequence whole.
+    pub fn test_sample(&self, seq: &Sequence) -> Option<Sample> {
+        match seq.points.kind() {
+            Kind::Trajectories => seq.clip(0, self.clip_len),
+            _ => Some(seq.sample()),
+        }
+    }
+
+    /// The training samples a sequence contributes to the folds that do not hold it out.
+    pub fn train_samples(&self, seq: &Sequence) -> Vec<Sample> {
+        let cut = match (seq.points.kind(), self.protocol) {
+            (Kind::Trajectories, Protocol::Vanilla) => {
+                seq.clip(0, self.clip_len).into_iter().collect()
+            }
+            (Kind::Trajectories, Protocol::Augment) => seq.clips(self.clip_len, self.clip_stride),
+            _ => vec![seq.sample()],
+        };
+        with_symmetries(cut, &self.symmetries)
+    }
+
+    /// One line for model cards and logs.
+    pub fn describe(&self) -> String {
+        let mut text = format!(
+            "protocol {:?}, clip {} frames",
+            self.protocol, self.clip_len
+        );
+        if self.protocol == Protocol::Augment && self.clip_stride != self.clip_len {
+            text.push_str(&format!(", clips every {} frames", self.clip_stride));
+        }
+        if !self.symmetries.is_empty() {
+            text.push_str(&format!(", with symmetries {:?}", self.symmetries));
+        }
+        text
     }
 }
 
@@ -57,8 +114,9 @@ pub fn train_samples(seq: &Sequence, protocol: Protocol, clip_len: usize) -> Vec
 #[derive(Debug, Clone)]
 pub struct CvSpec {
     pub train: TrainConfig,
-    pub protocol: Protocol,
-    pub clip_len: usize,
+    pub samples: SamplePlan,
+    /// The test symmetries of every fold's model card (see [`ModelCard::test_symmetries`]).
+    pub test_symmetries: Vec<Symmetry>,
     pub eval: EvalSettings,
     pub out: PathBuf,
 }
@@ -92,6 +150,7 @@ pub fn card_for(
         k_max,
         selection: crate::cluster::Selection::Sod,
         training,
+        test_symmetries: vec![],
         metrics: vec![],
         multifit_version: env!("CARGO_PKG_VERSION").into(),
         git_commit: None,
@@ -109,16 +168,19 @@ pub fn run_fold(
     if let Some(done) = finished_fold(&spec.out, name) {
         return Ok(done);
     }
-    let test = test_sample(&seqs[held_out], spec.clip_len).ok_or_else(|| TrainError::Sample {
-        name: name.clone(),
-        reason: "no test clip".into(),
-    })?;
+    let test = spec
+        .samples
+        .test_sample(&seqs[held_out])
+        .ok_or_else(|| TrainError::Sample {
+            name: name.clone(),
+            reason: "no test clip".into(),
+        })?;
     let kind = test.points.kind();
     let train_set: Vec<Sample> = seqs
         .iter()
         .enumerate()
         .filter(|(i, _)| *i != held_out)
-        .flat_map(|(_, s)| train_samples(s, spec.protocol, spec.clip_len))
+        .flat_map(|(_, s)| spec.samples.train_samples(s))
         .collect();
     let prepared = prepare(
         &train_set,
@@ -135,13 +197,23 @@ pub fn run_fold(
         seconds: outcome.seconds,
         machine: String::new(),
     };
-    let card = card_for(
+    let mut card = card_for(
         &format!("fold-{name}"),
         kind,
         &spec.train,
         spec.eval.k_max,
         info,
     );
+    card.test_symmetries = spec.test_symmetries.clone();
+    // The fold's model is kept, so that it can be evaluated again without retraining.
+    let model_dir = spec.out.join("models").join(name);
+    let keep = || -> Result<(), TrainError> {
+        card.write(&model_dir)
+            .map_err(|e| checkpoint_err(&model_dir, e))?;
+        outcome.net.save(&model_dir.join(WEIGHTS_FILE))?;
+        Ok(())
+    };
+    keep()?;
     let model = LoadedModel::from_parts(card, outcome.net, crate::model::cpu_device())?;
     let row = evaluate_sample(&model, &test, &spec.eval).map_err(|e| TrainError::Sample {
         name: name.clone(),
@@ -163,10 +235,7 @@ pub fn run_fold(
         )?;
         std::fs::rename(&tmp, &path)
     };
-    write().map_err(|e| TrainError::Checkpoint {
-        path: path.clone(),
-        reason: e.to_string(),
-    })?;
+    write().map_err(|e| checkpoint_err(&path, e))?;
     Ok(result)
 }
 

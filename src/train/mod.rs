@@ -265,7 +265,7 @@ pub fn known_k_error(
     errors.iter().sum::<f64>() / errors.len().max(1) as f64
 }
 
-fn checkpoint_err(path: &Path, e: impl std::fmt::Display) -> TrainError {
+pub(crate) fn checkpoint_err(path: &Path, e: impl std::fmt::Display) -> TrainError {
     TrainError::Checkpoint {
         path: path.to_path_buf(),
         reason: e.to_string(),
