@@ -144,6 +144,17 @@ fn overlapping_clips_and_symmetries_multiply_the_training_set() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    // A repeated symmetry is refused, not silently dropped.
+    let mut bad = args.clone();
+    let at = bad.iter().position(|a| *a == "--symmetry").unwrap();
+    bad[at + 1] = "mirror,mirror";
+    let out = run(&bad);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--symmetry") && err.contains("repeated"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -130,11 +130,12 @@ struct TrainArgs {
     #[arg(long)]
     clip_stride: Option<usize>,
     /// Add the images of every training sample under these symmetries (comma-separated:
-    /// mirror, reverse); every combination is added, so two give four copies.
+    /// mirror, reverse, rotate); every combination is added (mirror and reverse: four copies;
+    /// rotate counts its three quarter turns).
     #[arg(long, value_enum, value_delimiter = ',')]
     symmetry: Vec<Symmetry>,
     /// Test-time symmetries stored in the card: fits embed the input and its images under these
-    /// (comma-separated: mirror, reverse) and cluster the concatenated embeddings.
+    /// (comma-separated: mirror, reverse, rotate) and cluster the concatenated embeddings.
     #[arg(long, value_enum, value_delimiter = ',')]
     test_symmetry: Vec<Symmetry>,
     /// Largest K for automatic selection (stored in the card).
@@ -198,7 +199,7 @@ struct EvalCmd {
     #[arg(long)]
     record: Option<String>,
     /// Evaluate with these test-time symmetries instead of the card's (comma-separated: mirror,
-    /// reverse; the flag alone: none).
+    /// reverse, rotate; the flag alone: none).
     #[arg(long, value_enum, value_delimiter = ',', num_args = 0..)]
     test_symmetry: Option<Vec<Symmetry>>,
 }
@@ -371,7 +372,8 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
         .points
         .dim();
     let config = a.train.config(input_dim)?;
-    check_symmetries(&a.train.test_symmetry, kind)?;
+    check_symmetries("--symmetry", &a.train.symmetry, kind)?;
+    check_symmetries("--test-symmetry", &a.train.test_symmetry, kind)?;
     let init = a
         .init
         .as_deref()
@@ -527,7 +529,7 @@ fn eval_samples(seqs: &[Sequence], input_dim: usize) -> Vec<Sample> {
 fn eval_cmd(a: EvalCmd) -> Result<()> {
     let mut model = LoadedModel::load(&a.model)?;
     if let Some(list) = a.test_symmetry {
-        check_symmetries(&list, model.card.kind)?;
+        check_symmetries("--test-symmetry", &list, model.card.kind)?;
         model.card.test_symmetries = list;
     }
     let seqs = a.data.sequences()?;
@@ -592,7 +594,9 @@ fn cv_cmd(a: CvCmd) -> Result<()> {
         .context("no test sample")?
         .points
         .dim();
-    check_symmetries(&a.train.test_symmetry, seqs[0].points.kind())?;
+    let kind = seqs[0].points.kind();
+    check_symmetries("--symmetry", &a.train.symmetry, kind)?;
+    check_symmetries("--test-symmetry", &a.train.test_symmetry, kind)?;
     let spec = CvSpec {
         train: a.train.config(input_dim)?,
         samples,
@@ -677,8 +681,10 @@ fn cv_cmd(a: CvCmd) -> Result<()> {
     Ok(())
 }
 
-fn check_symmetries(list: &[Symmetry], kind: Kind) -> Result<()> {
-    multifit::data::symmetry::check(list, kind).map_err(|e| anyhow::anyhow!("--test-symmetry: {e}"))
+/// Refuses symmetries that are repeated or have no image for `kind` (reverse for points2d),
+/// rather than skipping them silently.
+fn check_symmetries(flag: &str, list: &[Symmetry], kind: Kind) -> Result<()> {
+    multifit::data::symmetry::check(list, kind).map_err(|e| anyhow::anyhow!("{flag}: {e}"))
 }
 
 /// Removes `flag VALUE` pairs (the `--flag=VALUE` form is removed by the caller's filter).
