@@ -284,30 +284,22 @@ impl LoadedModel {
         self.fused.forward(features, &self.threads)
     }
 
-    /// Width of the embeddings a fit with test symmetries `symmetries` clusters: `e` times the
-    /// number of inputs embedded (the input and its images).
-    pub fn fit_dim(&self, symmetries: &[Symmetry]) -> usize {
-        let kind = self.card.kind;
-        let copies = closure(vec![()], symmetries, |s, _| {
-            s.applies_to(kind).then_some(())
-        });
-        self.card.architecture.embed_dim * copies.len()
-    }
-
-    /// The embeddings a fit clusters: `points` `[n, d]` -> `[n, fit_dim]`. With test symmetries,
-    /// row i holds the embeddings of point i in the input and in each image, side by side,
-    /// divided by the square root of their number so that it keeps unit length.
+    /// The embeddings a fit clusters and their width: `points` `[n, d]` -> `[n, e * m]`, where
+    /// m counts the input and its images under every combination of `symmetries`. Row i holds
+    /// the embeddings of point i in each, side by side, divided by the square root of m so that
+    /// it keeps unit length. An image that does not exist (a symmetry that does not apply to the
+    /// kind, or coordinates pushed past the accepted range) is left out.
     fn fit_embeddings(
         &self,
         points: &PointSet,
         image: Option<ImageSize>,
         symmetries: &[Symmetry],
-    ) -> Result<Vec<f32>, FitError> {
+    ) -> Result<(Vec<f32>, usize), FitError> {
         let first = self.embed(&self.prepare(points, image)?);
-        if symmetries.is_empty() {
-            return Ok(first);
-        }
         let e = self.card.architecture.embed_dim;
+        if symmetries.is_empty() {
+            return Ok((first, e));
+        }
         let images = closure(vec![points.clone()], symmetries, |s, p| {
             s.apply_points(p, image)
         });
@@ -316,10 +308,11 @@ impl LoadedModel {
             all.push(self.embed(&self.prepare(p, image)?));
         }
         let scale = 1.0 / (all.len() as f32).sqrt();
-        Ok((0..points.len())
+        let rows = (0..points.len())
             .flat_map(|i| all.iter().flat_map(move |z| &z[i * e..(i + 1) * e]))
             .map(|v| v * scale)
-            .collect())
+            .collect();
+        Ok((rows, e * all.len()))
     }
 
     /// Normalise, embed (with the card's test symmetries) and cluster one point set.
@@ -347,9 +340,8 @@ impl LoadedModel {
             return Err(ClusterError::KOutOfRange { k, n: points.len() }.into());
         }
         let t0 = Instant::now();
-        let embeddings = self.fit_embeddings(points, image, symmetries)?;
+        let (embeddings, e) = self.fit_embeddings(points, image, symmetries)?;
         let t1 = Instant::now();
-        let e = self.fit_dim(symmetries);
         let clustering = cluster::cluster_on(Points::new(&embeddings, e)?, params, &self.threads)?;
         let t2 = Instant::now();
         Ok(FitOutcome {
@@ -446,10 +438,6 @@ mod tests {
             .unwrap();
         let plain = tiny(vec![]);
         let both = tiny(vec![Symmetry::Mirror, Symmetry::Reverse]);
-        let sym = [Symmetry::Mirror, Symmetry::Reverse];
-        assert_eq!(plain.fit_dim(&[]), 3);
-        assert_eq!(both.fit_dim(&sym), 12);
-        assert_eq!(both.fit_dim(&[Symmetry::Rotate]), 12);
         let a = plain.fit(&points, image, &params).unwrap();
         let b = both.fit(&points, image, &params).unwrap();
         assert_eq!((a.embed_dim, b.embed_dim), (3, 12));
@@ -481,9 +469,27 @@ mod tests {
         }
         // The mirrored input's own block differs from the input's: the images are real inputs.
         assert!((0..3).any(|j| (blocks[0][j] - blocks[1][j]).abs() > 1e-4));
-        // Without symmetries the same model embeds the input alone.
+        // Without symmetries the same model embeds the input alone; quarter turns give 4 images.
         let alone = both.fit_with(&points, image, &params, &[]).unwrap();
         assert_eq!(alone.embeddings, a.embeddings);
+        let turns = both
+            .fit_with(&points, image, &params, &[Symmetry::Rotate])
+            .unwrap();
+        assert_eq!(turns.embed_dim, 12);
+        // An image whose coordinates would leave the accepted range is left out, not an error:
+        // mirrored about x = 5e8, x = -1e9 would become 2e9.
+        let far = PointSet::from_flat(
+            Kind::Trajectories,
+            4,
+            vec![-1e9, 0.0, -1e9, 1.0, 1e9, 0.0, 1e9, 1.0, 0.0, 5.0, 1.0, 6.0],
+        )
+        .unwrap();
+        let wide = Some(ImageSize::new(1e9, 10.0).unwrap());
+        let fit = both
+            .fit_with(&far, wide, &params, &[Symmetry::Mirror])
+            .unwrap();
+        assert_eq!(fit.embed_dim, 3);
+        assert_eq!(fit.embeddings.len(), 3 * 3);
     }
 
     #[test]
