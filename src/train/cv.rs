@@ -53,16 +53,6 @@ pub struct SamplePlan {
 }
 
 impl SamplePlan {
-    /// The paper's plan: `protocol` with non-overlapping clips of `clip_len` frames.
-    pub fn paper(protocol: Protocol, clip_len: usize) -> Self {
-        Self {
-            protocol,
-            clip_len,
-            clip_stride: clip_len,
-            symmetries: vec![],
-        }
-    }
-
     pub fn validate(&self) -> Result<(), TrainError> {
         if self.clip_len < 2 {
             return Err(TrainError::Config("clips need at least 2 frames".into()));
