@@ -226,7 +226,9 @@ struct CvCmd {
 }
 
 impl TrainArgs {
-    fn samples(&self, clip_len: usize) -> Result<SamplePlan> {
+    /// The validated sample plan for sequences of `kind`.
+    fn samples(&self, clip_len: usize, kind: Kind) -> Result<SamplePlan> {
+        check_symmetries("--symmetry", &self.symmetry, kind)?;
         let plan = SamplePlan {
             protocol: self.protocol,
             clip_len,
@@ -357,7 +359,7 @@ fn gen_lce(a: GenLceArgs) -> Result<()> {
 fn train_cmd(a: TrainCmd) -> Result<()> {
     let seqs = a.data.sequences()?;
     let kind = seqs[0].points.kind();
-    let plan = a.train.samples(a.data.clip_len)?;
+    let plan = a.train.samples(a.data.clip_len, kind)?;
     let train_samples: Vec<Sample> = seqs.iter().flat_map(|s| plan.train_samples(s)).collect();
     let val_samples = match &a.val {
         Some(p) => {
@@ -372,7 +374,6 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
         .points
         .dim();
     let config = a.train.config(input_dim)?;
-    check_symmetries("--symmetry", &a.train.symmetry, kind)?;
     check_symmetries("--test-symmetry", &a.train.test_symmetry, kind)?;
     let init = a
         .init
@@ -588,14 +589,13 @@ fn eval_cmd(a: EvalCmd) -> Result<()> {
 
 fn cv_cmd(a: CvCmd) -> Result<()> {
     let seqs = a.data.sequences()?;
-    let samples = a.train.samples(a.data.clip_len)?;
+    let kind = seqs[0].points.kind();
+    let samples = a.train.samples(a.data.clip_len, kind)?;
     let input_dim = samples
         .test_sample(&seqs[0])
         .context("no test sample")?
         .points
         .dim();
-    let kind = seqs[0].points.kind();
-    check_symmetries("--symmetry", &a.train.symmetry, kind)?;
     check_symmetries("--test-symmetry", &a.train.test_symmetry, kind)?;
     let spec = CvSpec {
         train: a.train.config(input_dim)?,
