@@ -44,6 +44,16 @@ pub struct MetricRecord {
     pub command: String,
 }
 
+/// A further network in an ensemble: same architecture, input and normalisation as the card's
+/// own network, its own weights and training.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Member {
+    /// Its weights file, a plain file name inside the model directory.
+    pub weights: String,
+    pub loss: Loss,
+    pub training: TrainingInfo,
+}
+
 /// The model card, `model.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ModelCard {
@@ -64,6 +74,11 @@ pub struct ModelCard {
     /// clustering. Empty: the input alone, as in the paper.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub test_symmetries: Vec<Symmetry>,
+    /// Further networks (an ensemble): a fit embeds every test image with the card's network
+    /// (`weights.safetensors`, `loss`, `training`) and with each of these, and sets all the
+    /// embeddings of a point side by side. Empty: one network, as in the paper.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub members: Vec<Member>,
     #[serde(default)]
     pub metrics: Vec<MetricRecord>,
     /// multifit version and git commit that trained it.
@@ -88,6 +103,8 @@ pub enum RegistryError {
     Empty { path: PathBuf },
     #[error("two model directories are named {name:?}")]
     Duplicate { name: String },
+    #[error("cannot make an ensemble: {0}")]
+    Ensemble(String),
 }
 
 impl ModelCard {
@@ -130,6 +147,20 @@ impl ModelCard {
         }
         symmetry::check(&self.test_symmetries, self.kind)
             .map_err(|e| format!("test_symmetries: {e}"))?;
+        let mut files = vec![WEIGHTS_FILE];
+        for m in &self.members {
+            let plain = Path::new(&m.weights).file_name() == Some(m.weights.as_ref());
+            if !plain || !m.weights.ends_with(".safetensors") {
+                return Err(format!(
+                    "members: weights {:?} must be a plain .safetensors file name",
+                    m.weights
+                ));
+            }
+            if files.contains(&m.weights.as_str()) {
+                return Err(format!("members: weights {:?} named twice", m.weights));
+            }
+            files.push(&m.weights);
+        }
         self.architecture.validate().map_err(|e| e.to_string())
     }
 
@@ -162,6 +193,8 @@ pub struct LoadedModel {
     pub card: ModelCard,
     pub net: EmbeddingNet,
     fused: FusedNet,
+    /// The fused forwards of the card's further networks, in the card's order.
+    members: Vec<FusedNet>,
     /// Threads one fit may use.
     threads: Threads,
     device: Device,
@@ -203,21 +236,44 @@ impl LoadedModel {
         let card = ModelCard::read(dir)?;
         let device = cpu_device();
         let net = EmbeddingNet::load(&card.architecture, &dir.join(WEIGHTS_FILE), &device)?;
-        Ok(Self::from_parts(card, net, device)?)
+        let members = card
+            .members
+            .iter()
+            .map(|m| {
+                let net = EmbeddingNet::load(&card.architecture, &dir.join(&m.weights), &device)?;
+                FusedNet::from_net(&net)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut model = Self::assemble(card, net, device)?;
+        model.members = members;
+        Ok(model)
     }
 
     /// Wraps a freshly trained network. Fits run on the calling thread until
     /// [`LoadedModel::with_threads`] says otherwise.
+    /// A card with `members` needs their weights: load it with [`LoadedModel::load`].
     pub fn from_parts(
         card: ModelCard,
         net: EmbeddingNet,
         device: Device,
     ) -> Result<Self, ModelError> {
+        if !card.members.is_empty() {
+            return Err(ModelError::Config(format!(
+                "model {} is an ensemble of {} networks: load it from its directory",
+                card.name,
+                card.members.len() + 1
+            )));
+        }
+        Self::assemble(card, net, device)
+    }
+
+    fn assemble(card: ModelCard, net: EmbeddingNet, device: Device) -> Result<Self, ModelError> {
         let fused = FusedNet::from_net(&net)?;
         Ok(Self {
             card,
             net,
             fused,
+            members: Vec::new(),
             threads: Threads::default(),
             device,
         })
@@ -279,33 +335,42 @@ impl LoadedModel {
         ))
     }
 
-    /// Embeddings of prepared input by the fused forward: `[n, feature_dim]` -> `[n, e]`.
+    /// Embeddings of prepared input by the fused forward of the card's own network (not its
+    /// members'): `[n, feature_dim]` -> `[n, e]`.
     pub fn embed(&self, features: &[f32]) -> Vec<f32> {
         self.fused.forward(features, &self.threads)
     }
 
     /// The embeddings a fit clusters and their width: `points` `[n, d]` -> `[n, e * m]`, where
-    /// m counts the input and its images under every combination of `symmetries`. Row i holds
-    /// the embeddings of point i in each, side by side, divided by the square root of m so that
-    /// it keeps unit length. An image that does not exist (a symmetry that does not apply to the
-    /// kind, or coordinates pushed past the accepted range) is left out.
+    /// m counts the networks (the card's and its members) times the images (the input and its
+    /// images under every combination of `symmetries`). Row i holds the embeddings of point i by
+    /// each network of each image (networks vary fastest), side by side, divided by the square
+    /// root of m so that it keeps unit length. An image that does not exist (a symmetry that
+    /// does not apply to the kind, or coordinates pushed past the accepted range) is left out.
     fn fit_embeddings(
         &self,
         points: &PointSet,
         image: Option<ImageSize>,
         symmetries: &[Symmetry],
     ) -> Result<(Vec<f32>, usize), FitError> {
-        let first = self.embed(&self.prepare(points, image)?);
         let e = self.card.architecture.embed_dim;
-        if symmetries.is_empty() {
-            return Ok((first, e));
+        let images = if symmetries.is_empty() {
+            vec![points.clone()]
+        } else {
+            closure(vec![points.clone()], symmetries, |s, p| {
+                s.apply_points(p, image)
+            })
+        };
+        let mut all = Vec::new();
+        for p in &images {
+            let x = self.prepare(p, image)?;
+            all.push(self.embed(&x));
+            for member in &self.members {
+                all.push(member.forward(&x, &self.threads));
+            }
         }
-        let images = closure(vec![points.clone()], symmetries, |s, p| {
-            s.apply_points(p, image)
-        });
-        let mut all = vec![first];
-        for p in &images[1..] {
-            all.push(self.embed(&self.prepare(p, image)?));
+        if all.len() == 1 {
+            return Ok((all.remove(0), e));
         }
         let scale = 1.0 / (all.len() as f32).sqrt();
         let rows = (0..points.len())
@@ -354,6 +419,87 @@ impl LoadedModel {
     }
 }
 
+/// Writes to `out` a model named `name` that embeds with every model in `dirs` (an ensemble):
+/// the first model's card and weights, and the others as its members (`weights-<i>.safetensors`).
+/// The models must share kind, input, normalisation and architecture, and be single networks.
+/// The first card's metrics are dropped: they measured that network alone.
+pub fn write_ensemble(
+    dirs: &[PathBuf],
+    out: &Path,
+    name: &str,
+) -> Result<ModelCard, RegistryError> {
+    let fail = |reason: String| RegistryError::Ensemble(reason);
+    if dirs.len() < 2 {
+        return Err(fail(format!(
+            "needs at least two models, got {}",
+            dirs.len()
+        )));
+    }
+    let cards = dirs
+        .iter()
+        .map(|d| ModelCard::read(d))
+        .collect::<Result<Vec<_>, _>>()?;
+    let first = &cards[0];
+    for (dir, card) in dirs.iter().zip(&cards) {
+        if !card.members.is_empty() {
+            return Err(fail(format!("{} is itself an ensemble", dir.display())));
+        }
+        let same = (
+            card.kind,
+            card.input_dim,
+            card.normalization,
+            &card.architecture,
+        ) == (
+            first.kind,
+            first.input_dim,
+            first.normalization,
+            &first.architecture,
+        );
+        if !same {
+            return Err(fail(format!(
+                "{} differs from {} in kind, input, normalisation or architecture",
+                dir.display(),
+                dirs[0].display()
+            )));
+        }
+        if dir.canonicalize().ok() == out.canonicalize().ok() {
+            return Err(fail(format!(
+                "{} is both a member and the output",
+                dir.display()
+            )));
+        }
+    }
+    let mut card = first.clone();
+    card.name = name.to_string();
+    card.metrics.clear();
+    card.members = cards[1..]
+        .iter()
+        .enumerate()
+        .map(|(i, c)| Member {
+            weights: format!("weights-{}.safetensors", i + 1),
+            loss: c.loss,
+            training: c.training.clone(),
+        })
+        .collect();
+    card.validate().map_err(|reason| RegistryError::Card {
+        path: out.join(CARD_FILE),
+        reason,
+    })?;
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| RegistryError::Io { path, source }
+    };
+    std::fs::create_dir_all(out).map_err(io(out))?;
+    let files =
+        std::iter::once(WEIGHTS_FILE).chain(card.members.iter().map(|m| m.weights.as_str()));
+    for (dir, file) in dirs.iter().zip(files) {
+        let from = dir.join(WEIGHTS_FILE);
+        std::fs::copy(&from, out.join(file)).map_err(io(&from))?;
+    }
+    card.write(out).map_err(io(&out.join(CARD_FILE)))?;
+    Ok(card)
+}
+
 /// Every model under a directory, by name. Fails on the first directory that cannot be loaded,
 /// naming it: a server must not start with half its models.
 pub fn load_all(root: &Path) -> Result<BTreeMap<String, LoadedModel>, RegistryError> {
@@ -389,6 +535,10 @@ mod tests {
     use crate::train::{Schedule, TrainConfig};
 
     fn tiny(symmetries: Vec<Symmetry>) -> LoadedModel {
+        tiny_seeded(symmetries, 7)
+    }
+
+    fn tiny_seeded(symmetries: Vec<Symmetry>, seed: u64) -> LoadedModel {
         let model = ModelConfig {
             input_dim: 4,
             width: 8,
@@ -400,7 +550,7 @@ mod tests {
             graph_neighbors: 0,
         };
         let device = cpu_device();
-        let net = model.init_seeded(&device, 7).unwrap();
+        let net = model.init_seeded(&device, seed).unwrap();
         let config = TrainConfig {
             model,
             loss: Loss::L2,
@@ -416,7 +566,7 @@ mod tests {
             command: String::new(),
             epochs: 1,
             learning_rate: 1e-3,
-            seed: 0,
+            seed,
             seconds: 0.0,
             machine: String::new(),
         };
@@ -508,6 +658,127 @@ mod tests {
                 .contains("does not apply to points2d")
         );
         card.test_symmetries = vec![Symmetry::Mirror];
+        card.validate().unwrap();
+    }
+
+    /// A directory removed when dropped.
+    struct TempDir(PathBuf);
+
+    impl TempDir {
+        fn new(tag: &str) -> Self {
+            let dir = std::env::temp_dir().join(format!("multifit-{tag}-{}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&dir);
+            Self(dir)
+        }
+
+        fn path(&self) -> &Path {
+            &self.0
+        }
+    }
+
+    impl Drop for TempDir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    fn save(model: &LoadedModel, dir: &Path) {
+        model.card.write(dir).unwrap();
+        model.net.save(&dir.join(WEIGHTS_FILE)).unwrap();
+    }
+
+    #[test]
+    fn an_ensemble_sets_every_network_of_every_image_side_by_side() {
+        let tmp = TempDir::new("ensemble");
+        let (a, b) = (tiny_seeded(vec![], 7), tiny_seeded(vec![], 8));
+        let dirs = [tmp.path().join("a"), tmp.path().join("b")];
+        save(&a, &dirs[0]);
+        save(&b, &dirs[1]);
+        let out = tmp.path().join("both");
+        let card = write_ensemble(&dirs, &out, "both").unwrap();
+        assert_eq!(card.name, "both");
+        assert_eq!(card.members.len(), 1);
+        assert_eq!(card.members[0].weights, "weights-1.safetensors");
+        assert_eq!(card.members[0].training.seed, 8);
+        assert_eq!(ModelCard::read(&out).unwrap(), card);
+        let mut both = LoadedModel::load(&out).unwrap();
+
+        let values = (0..40).map(|v| ((v * 5) % 11) as f64).collect();
+        let points = PointSet::from_flat(Kind::Trajectories, 4, values).unwrap();
+        let image = Some(ImageSize::new(20.0, 20.0).unwrap());
+        let params = ClusterParams::builder()
+            .selection(Selection::Fixed(2))
+            .seed(1)
+            .build()
+            .unwrap();
+        let fit = both.fit(&points, image, &params).unwrap();
+        let (za, zb) = (
+            a.fit(&points, image, &params).unwrap().embeddings,
+            b.fit(&points, image, &params).unwrap().embeddings,
+        );
+        assert_eq!(fit.embed_dim, 6);
+        let s = 1.0 / 2f32.sqrt();
+        for i in 0..points.len() {
+            for j in 0..3 {
+                assert!((fit.embeddings[i * 6 + j] - za[i * 3 + j] * s).abs() < 1e-6);
+                assert!((fit.embeddings[i * 6 + 3 + j] - zb[i * 3 + j] * s).abs() < 1e-6);
+            }
+        }
+        // Two different seeds: the member is a real second network.
+        assert!((0..3).any(|j| (za[j] - zb[j]).abs() > 1e-4));
+        // With a symmetry: 2 networks x 2 images, networks varying fastest.
+        both.card.test_symmetries = vec![Symmetry::Mirror];
+        let fit = both.fit(&points, image, &params).unwrap();
+        assert_eq!(fit.embed_dim, 12);
+        let mirrored = Symmetry::Mirror.apply_points(&points, image).unwrap();
+        let zbm = b.fit(&mirrored, image, &params).unwrap().embeddings;
+        for j in 0..3 {
+            assert!((fit.embeddings[9 + j] - zbm[j] / 2.0).abs() < 1e-6);
+        }
+        // A freshly trained network cannot claim members it does not have.
+        let err = LoadedModel::from_parts(card, a.net.clone(), cpu_device()).unwrap_err();
+        assert!(err.to_string().contains("ensemble of 2 networks"), "{err}");
+    }
+
+    #[test]
+    fn ensembles_refuse_mismatched_or_single_models() {
+        let tmp = TempDir::new("ensemble-refusals");
+        let a = tiny(vec![]);
+        let mut wider = tiny(vec![]);
+        wider.card.architecture.width = 16;
+        let dirs = [tmp.path().join("a"), tmp.path().join("w")];
+        save(&a, &dirs[0]);
+        wider.card.write(&dirs[1]).unwrap();
+        let out = tmp.path().join("e");
+        let err = write_ensemble(&dirs[..1], &out, "e").unwrap_err();
+        assert!(err.to_string().contains("at least two"), "{err}");
+        let err = write_ensemble(&dirs, &out, "e").unwrap_err();
+        assert!(err.to_string().contains("architecture"), "{err}");
+        let err = write_ensemble(&[dirs[0].clone(), dirs[0].clone()], &dirs[0], "e").unwrap_err();
+        assert!(
+            err.to_string().contains("both a member and the output"),
+            "{err}"
+        );
+        assert!(!out.exists());
+        // Cards refuse member weights that are not plain, distinct file names.
+        let mut card = a.card.clone();
+        let member = |w: &str| Member {
+            weights: w.into(),
+            loss: Loss::L2,
+            training: card.training.clone(),
+        };
+        for bad in [
+            "../x.safetensors",
+            "weights.safetensors",
+            "w.bin",
+            "sub/w.safetensors",
+        ] {
+            card.members = vec![member(bad)];
+            assert!(card.validate().is_err(), "{bad}");
+        }
+        card.members = vec![member("w1.safetensors"), member("w1.safetensors")];
+        assert!(card.validate().unwrap_err().contains("named twice"));
+        card.members = vec![member("w1.safetensors"), member("w2.safetensors")];
         card.validate().unwrap();
     }
 }

@@ -136,6 +136,11 @@ fn shipped_model_cards_match_the_schema() {
             path.display(),
             a
         );
+        let member = keys(&s["properties"]["members"]["items"]["properties"]);
+        for m in card["members"].as_array().into_iter().flatten() {
+            let have: BTreeSet<String> = m.as_object().unwrap().keys().cloned().collect();
+            assert_eq!(have, member, "{}: member {m}", path.display());
+        }
     }
 }
 

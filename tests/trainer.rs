@@ -226,6 +226,57 @@ fn train_then_eval_on_kt3dmoseg_clips() {
     );
     // The trained model directory loads in the server's registry.
     multifit::registry::LoadedModel::load(&out).expect("servable model directory");
+
+    // A second seed, then both as one ensemble model that eval and the registry take.
+    let second = temp("kt-model-seed1");
+    let mut args = vec![
+        "train",
+        "--name",
+        "tiny-kt-1",
+        "--data",
+        s(&data),
+        "--protocol",
+        "augment",
+        "--seed",
+        "1",
+        "--out",
+        s(&second),
+        "--run-dir",
+        s(&run_dir),
+    ];
+    args.extend(TINY);
+    ok(&args);
+    let both = temp("kt-ensemble");
+    let text = ok(&[
+        "ensemble",
+        "--model",
+        s(&out),
+        "--model",
+        s(&second),
+        "--out",
+        s(&both),
+    ]);
+    assert!(text.contains("2 networks"), "{text}");
+    let card: Value =
+        serde_json::from_slice(&std::fs::read(both.join("model.json")).unwrap()).unwrap();
+    assert_eq!(card["name"], both.file_name().unwrap().to_str().unwrap());
+    assert_eq!(card["members"][0]["training"]["seed"], 1);
+    assert_eq!(card["metrics"].as_array().unwrap().len(), 0);
+    let text = ok(&["eval", "--model", s(&both), "--data", s(&first5), "--json"]);
+    let v: Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["rows"].as_array().unwrap().len(), 2);
+    let model = multifit::registry::LoadedModel::load(&both).expect("servable ensemble");
+    assert_eq!(model.card.members.len(), 1);
+    // One model alone is not an ensemble.
+    let alone = run(&[
+        "ensemble",
+        "--model",
+        s(&out),
+        "--out",
+        s(&temp("kt-alone")),
+    ]);
+    assert!(!alone.status.success());
+    assert!(String::from_utf8_lossy(&alone.stderr).contains("at least two"));
 }
 
 #[test]

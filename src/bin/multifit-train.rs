@@ -12,7 +12,9 @@ use multifit::data::synthetic::{LceConfig, LceGenerator, LceVariant};
 use multifit::data::{Kind, Normalization, Sample, Sequence, Symmetry, load_sequences};
 use multifit::loss::Loss;
 use multifit::model::ModelConfig;
-use multifit::registry::{LoadedModel, MetricRecord, ModelCard, TrainingInfo, WEIGHTS_FILE};
+use multifit::registry::{
+    LoadedModel, MetricRecord, ModelCard, TrainingInfo, WEIGHTS_FILE, write_ensemble,
+};
 use multifit::train::cv::{self, CvSpec, Protocol, SamplePlan};
 use multifit::train::eval::{EvalSettings, evaluate_sample, format_table, totals};
 use multifit::train::{EpochLog, Hooks, Schedule, TrainConfig, prepare, train};
@@ -37,6 +39,21 @@ enum Command {
     Eval(EvalCmd),
     /// Leave-one-sequence-out cross-validation.
     Cv(CvCmd),
+    /// Combine trained models into one that clusters all their embeddings side by side.
+    Ensemble(EnsembleCmd),
+}
+
+#[derive(Args, Debug)]
+struct EnsembleCmd {
+    /// Model directory (repeatable, at least two; the first one's card is the ensemble's).
+    #[arg(long = "model", required = true)]
+    models: Vec<PathBuf>,
+    /// Output model directory.
+    #[arg(long)]
+    out: PathBuf,
+    /// The ensemble's name (default: the output directory's name).
+    #[arg(long)]
+    name: Option<String>,
 }
 
 #[derive(Args, Debug)]
@@ -587,6 +604,25 @@ fn eval_cmd(a: EvalCmd) -> Result<()> {
     Ok(())
 }
 
+fn ensemble_cmd(a: EnsembleCmd) -> Result<()> {
+    let name = match a.name {
+        Some(n) => n,
+        None => a
+            .out
+            .file_name()
+            .and_then(|n| n.to_str())
+            .context("--out has no directory name to take as the ensemble's: give --name")?
+            .to_string(),
+    };
+    let card = write_ensemble(&a.models, &a.out, &name)?;
+    println!(
+        "wrote {} ({} networks)",
+        a.out.display(),
+        card.members.len() + 1
+    );
+    Ok(())
+}
+
 fn cv_cmd(a: CvCmd) -> Result<()> {
     let seqs = a.data.sequences()?;
     let kind = seqs[0].points.kind();
@@ -718,6 +754,7 @@ fn main() -> ExitCode {
         Command::Train(a) => train_cmd(a),
         Command::Eval(a) => eval_cmd(a),
         Command::Cv(a) => cv_cmd(a),
+        Command::Ensemble(a) => ensemble_cmd(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -141,6 +141,7 @@ pub fn card_for(
         selection: crate::cluster::Selection::Sod,
         training,
         test_symmetries: vec![],
+        members: vec![],
         metrics: vec![],
         multifit_version: env!("CARGO_PKG_VERSION").into(),
         git_commit: None,
