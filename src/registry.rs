@@ -576,9 +576,9 @@ mod tests {
         LoadedModel::from_parts(card, net, device).unwrap()
     }
 
-    #[test]
-    fn test_symmetries_concatenate_unit_embeddings_of_every_image() {
-        let values = (0..40).map(|v| ((v * 7) % 13) as f64).collect();
+    /// Ten 2-frame tracks with coordinates `(v * a) % m`, a 20 x 20 image and k-means with K = 2.
+    fn ten_tracks(a: usize, m: usize) -> (PointSet, Option<ImageSize>, ClusterParams) {
+        let values = (0..40).map(|v| ((v * a) % m) as f64).collect();
         let points = PointSet::from_flat(Kind::Trajectories, 4, values).unwrap();
         let image = Some(ImageSize::new(20.0, 20.0).unwrap());
         let params = ClusterParams::builder()
@@ -586,6 +586,12 @@ mod tests {
             .seed(1)
             .build()
             .unwrap();
+        (points, image, params)
+    }
+
+    #[test]
+    fn test_symmetries_concatenate_unit_embeddings_of_every_image() {
+        let (points, image, params) = ten_tracks(7, 13);
         let plain = tiny(vec![]);
         let both = tiny(vec![Symmetry::Mirror, Symmetry::Reverse]);
         let a = plain.fit(&points, image, &params).unwrap();
@@ -703,14 +709,7 @@ mod tests {
         assert_eq!(ModelCard::read(&out).unwrap(), card);
         let mut both = LoadedModel::load(&out).unwrap();
 
-        let values = (0..40).map(|v| ((v * 5) % 11) as f64).collect();
-        let points = PointSet::from_flat(Kind::Trajectories, 4, values).unwrap();
-        let image = Some(ImageSize::new(20.0, 20.0).unwrap());
-        let params = ClusterParams::builder()
-            .selection(Selection::Fixed(2))
-            .seed(1)
-            .build()
-            .unwrap();
+        let (points, image, params) = ten_tracks(5, 11);
         let fit = both.fit(&points, image, &params).unwrap();
         let (za, zb) = (
             a.fit(&points, image, &params).unwrap().embeddings,
