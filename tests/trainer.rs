@@ -133,6 +133,38 @@ fn overlapping_clips_and_symmetries_multiply_the_training_set() {
             && described.contains("Mirror, Reverse"),
         "{described}"
     );
+    // cv: a fold trains on the other sequence's clips; 'augment-leaky' adds the held-out
+    // sequence's clips that start after its test clip (frames 6 on), as the authors' code does.
+    let load = |n: &str| multifit::data::Sequence::load(&data.join(format!("{n}.json"))).unwrap();
+    let (held, other) = (load(names[0]), load(names[1]));
+    let later = held.clips_from(5, 5, 1).len();
+    assert!(later > 0 && later < held.clips(5, 1).len());
+    for (protocol, want) in [
+        ("augment", other.clips(5, 1).len()),
+        ("augment-leaky", other.clips(5, 1).len() + later),
+    ] {
+        let cv_out = temp(&format!("kt-cv-{protocol}"));
+        let mut cv = vec![
+            "cv",
+            "--data",
+            s(&data),
+            "--protocol",
+            protocol,
+            "--clip-stride",
+            "1",
+            "--fold",
+            names[0],
+            "--out",
+            s(&cv_out),
+        ];
+        cv.extend(TINY);
+        ok(&cv);
+        let fold: Value = serde_json::from_slice(
+            &std::fs::read(cv_out.join("folds").join(format!("{}.json", names[0]))).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(fold["train_samples"], want, "{protocol}");
+    }
     // A stride of 0 is refused with a message, before any training.
     let mut bad = args.clone();
     let at = bad.iter().position(|a| *a == "--clip-stride").unwrap();

@@ -139,7 +139,9 @@ struct TrainArgs {
     /// Gaussian jitter sigma on normalised training inputs (0 = off).
     #[arg(long, default_value_t = 0.0)]
     jitter: f64,
-    /// Protocol for trajectory data: vanilla (first clip) or augment (all non-overlapping clips).
+    /// Protocol for trajectory data: vanilla (first clip) or augment (all non-overlapping clips);
+    /// augment-leaky (cv only) also trains each fold on its held-out sequence's later clips, as
+    /// the authors' code does: a diagnostic, not an honest protocol.
     #[arg(long, value_enum, default_value = "vanilla")]
     protocol: Protocol,
     /// Augment protocol: frames between the starts of two clips (default: the clip length, the

@@ -184,9 +184,14 @@ impl Sequence {
     /// `stride = len` gives the non-overlapping clips of the paper's 'Augment' setting; the first
     /// clip is always the test clip.
     pub fn clips(&self, len: usize, stride: usize) -> Vec<Sample> {
+        self.clips_from(0, len, stride)
+    }
+
+    /// [`Sequence::clips`] whose first clip starts at frame `first` (0-based) instead of 0.
+    pub fn clips_from(&self, first: usize, len: usize, stride: usize) -> Vec<Sample> {
         let (len, stride) = (len.max(1), stride.max(1));
         (0..)
-            .map(|c| c * stride)
+            .map(|c| first + c * stride)
             .take_while(|start| start + len <= self.frames())
             .filter_map(|start| self.clip(start, len))
             .collect()
@@ -289,6 +294,11 @@ mod tests {
             "point 2 is invisible in frame 3"
         );
         assert_eq!(seq.clips(3, 3).len(), 1);
+        // From frame 2 (0-based) on: the one clip of frames 3..4.
+        let later = seq.clips_from(2, 2, 1);
+        assert_eq!(later.len(), 1);
+        assert_eq!(later[0].name, second.name);
+        assert!(seq.clips_from(3, 2, 1).is_empty());
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //! trains on the first clip of every other sequence, 'augment' on every non-overlapping clip of
 //! every other sequence (or, with a smaller clip stride, overlapping ones), and training samples may
 //! be multiplied by structure-preserving symmetries ([`SamplePlan`]). No clip of the held-out
-//! sequence is ever seen in training.
+//! sequence is seen in training, except under the diagnostic 'augment-leaky' protocol.
 //! Correspondence sequences are used whole. Each finished fold is written to
 //! `<out>/folds/<name>.json`, its model to `<out>/models/<name>/`, and is not retrained when the
 //! run is restarted.
@@ -28,6 +28,10 @@ pub enum Protocol {
     Vanilla,
     /// Every non-overlapping clip of every other sequence.
     Augment,
+    /// 'augment', plus the clips of the held-out sequence that start after its test clip: what
+    /// the authors' public code trains on. The later clips show the test clip's motions, so this
+    /// is not an honest protocol; it exists to measure how much that leak is worth.
+    AugmentLeaky,
 }
 
 /// One finished fold.
@@ -78,10 +82,23 @@ impl SamplePlan {
             (Kind::Trajectories, Protocol::Vanilla) => {
                 seq.clip(0, self.clip_len).into_iter().collect()
             }
-            (Kind::Trajectories, Protocol::Augment) => seq.clips(self.clip_len, self.clip_stride),
+            (Kind::Trajectories, Protocol::Augment | Protocol::AugmentLeaky) => {
+                seq.clips(self.clip_len, self.clip_stride)
+            }
             _ => vec![seq.sample()],
         };
         with_symmetries(cut, &self.symmetries)
+    }
+
+    /// The training samples the held-out sequence itself adds to its fold: none, except under
+    /// [`Protocol::AugmentLeaky`], where its clips starting after the test clip (frames
+    /// clip_len + 1 onwards) join, with their symmetric images.
+    pub fn held_out_samples(&self, seq: &Sequence) -> Vec<Sample> {
+        if self.protocol != Protocol::AugmentLeaky || seq.points.kind() != Kind::Trajectories {
+            return vec![];
+        }
+        let later = seq.clips_from(self.clip_len, self.clip_len, self.clip_stride);
+        with_symmetries(later, &self.symmetries)
     }
 
     /// One line for model cards and logs.
@@ -90,7 +107,7 @@ impl SamplePlan {
             "protocol {:?}, clip {} frames",
             self.protocol, self.clip_len
         );
-        if self.protocol == Protocol::Augment && self.clip_stride != self.clip_len {
+        if self.protocol != Protocol::Vanilla && self.clip_stride != self.clip_len {
             text.push_str(&format!(", clips every {} frames", self.clip_stride));
         }
         if !self.symmetries.is_empty() {
@@ -172,6 +189,7 @@ pub fn run_fold(
         .enumerate()
         .filter(|(i, _)| *i != held_out)
         .flat_map(|(_, s)| spec.samples.train_samples(s))
+        .chain(spec.samples.held_out_samples(&seqs[held_out]))
         .collect();
     let prepared = prepare(
         &train_set,
