@@ -182,7 +182,7 @@ impl<'a> Points<'a> {
     pub fn new(data: &'a [f32], dim: usize) -> Result<Self, ClusterError> {
         if dim == 0
             || data.is_empty()
-            || data.len() % dim != 0
+            || !data.len().is_multiple_of(dim)
             || data.iter().any(|v| !v.is_finite())
         {
             return Err(ClusterError::BadEmbeddings);

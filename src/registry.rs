@@ -731,8 +731,9 @@ mod tests {
         assert_eq!(fit.embed_dim, 12);
         let mirrored = Symmetry::Mirror.apply_points(&points, image).unwrap();
         let zbm = b.fit(&mirrored, image, &params).unwrap().embeddings;
-        for j in 0..3 {
-            assert!((fit.embeddings[9 + j] - zbm[j] / 2.0).abs() < 1e-6);
+        // Point 0's last block: the member's embedding of the mirrored input.
+        for (got, want) in fit.embeddings[9..12].iter().zip(&zbm[..3]) {
+            assert!((got - want / 2.0).abs() < 1e-6);
         }
         // A freshly trained network cannot claim members it does not have.
         let err = LoadedModel::from_parts(card, a.net.clone(), cpu_device()).unwrap_err();

@@ -69,10 +69,10 @@ pub struct FitJob {
 
 /// The shipped model used for a kind when the request names none: the first (by name) whose
 /// card has that kind.
-pub fn default_model<'a>(
-    models: &'a BTreeMap<String, Arc<LoadedModel>>,
+pub fn default_model(
+    models: &BTreeMap<String, Arc<LoadedModel>>,
     kind: Kind,
-) -> Option<&'a Arc<LoadedModel>> {
+) -> Option<&Arc<LoadedModel>> {
     models.values().find(|m| m.card.kind == kind)
 }
 

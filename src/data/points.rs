@@ -46,7 +46,7 @@ impl Kind {
         match self {
             Kind::Points2d => dim == 2,
             Kind::Correspondences => dim == 4,
-            Kind::Trajectories => dim >= 4 && dim % 2 == 0,
+            Kind::Trajectories => dim >= 4 && dim.is_multiple_of(2),
         }
     }
 
@@ -156,7 +156,7 @@ impl PointSet {
     pub fn from_trajectory_matrix(matrix: &[Vec<f64>]) -> Result<Self, InputError> {
         let first = matrix.first().ok_or(InputError::Empty)?;
         let rows = matrix.len();
-        if rows < 4 || rows % 2 != 0 {
+        if rows < 4 || !rows.is_multiple_of(2) {
             return Err(InputError::BadTrajectoryMatrix { rows });
         }
         let n = first.len();

@@ -12,7 +12,10 @@ use ndarray::{ArrayView2, ArrayViewMut2};
 /// # Panics
 /// If the slice lengths do not match the shapes (a programming error, not an input error).
 pub fn matmul(a: &[f32], k: usize, b: &[f32], m: usize, out: &mut [f32]) {
-    assert!(k > 0 && m > 0 && a.len() % k == 0, "matmul: bad shapes");
+    assert!(
+        k > 0 && m > 0 && a.len().is_multiple_of(k),
+        "matmul: bad shapes"
+    );
     let n = a.len() / k;
     let shape = "matmul: bad shapes";
     let a = ArrayView2::from_shape((n, k), a).expect(shape);

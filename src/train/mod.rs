@@ -179,6 +179,7 @@ pub struct TrainOutcome {
 
 /// Side channels of a run: a stop flag (Ctrl-C), a per-epoch callback, a checkpoint directory,
 /// starting weights.
+#[derive(Default)]
 pub struct Hooks<'a> {
     pub stop: Option<&'a AtomicBool>,
     pub on_epoch: Option<&'a mut dyn FnMut(&EpochLog)>,
@@ -188,19 +189,6 @@ pub struct Hooks<'a> {
     /// Weights (safetensors of `config.model`) to start from instead of the seeded
     /// initialisation: a warm restart or fine-tuning. A resumed checkpoint takes precedence.
     pub init: Option<&'a Path>,
-}
-
-impl Default for Hooks<'_> {
-    fn default() -> Self {
-        Self {
-            stop: None,
-            on_epoch: None,
-            on_step: None,
-            checkpoint: None,
-            resume: false,
-            init: None,
-        }
-    }
 }
 
 const LAST: &str = "last.safetensors";
