@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Evaluates the kept fold models of a KT3DMoSeg cross-validation run (<run>/models/<fold>/) on
 # their held-out test clips, with the given test-time symmetries (default: none), prints the
-# totals and writes every fold's row to <run>/kept-eval[-<symmetries>].json.
+# totals and writes them with every fold's row to <run>/kept-eval[-<symmetries>].json (the
+# totals in the shape of a cv run's summary.json).
 # Usage: scripts/cv-eval-kept.sh runs/cv/<run> ["mirror,reverse"]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -20,11 +21,12 @@ while text[i:].strip():
     i += len(text[i:]) - len(text[i:].lstrip())
     obj, i = dec.raw_decode(text, i)
     rows += obj["rows"]
-totals = {}
+totals = {"samples": len(rows)}
 for key in ["known", "sod", "silhouette"]:
-    e = [100 * r[key]["error"] for r in rows]
-    right = 100 * sum(r[key]["k"] == r["k_true"] for r in rows) / len(rows)
-    totals[key] = {"mean_error": st.mean(e), "median_error": st.median(e), "k_correct": right}
-    print(f"{key:10s} mean {st.mean(e):.2f} median {st.median(e):.2f} K right {right:.1f} % ({len(rows)} folds)")
+    e = [r[key]["error"] for r in rows]
+    right = sum(r[key]["k"] == r["k_true"] for r in rows) / len(rows)
+    nmi = st.mean(r[key]["nmi"] for r in rows)
+    totals[key] = {"mean_error": st.mean(e), "median_error": st.median(e), "mean_nmi": nmi, "k_correct": right}
+    print(f"{key:10s} mean {100 * st.mean(e):.2f} median {100 * st.median(e):.2f} K right {100 * right:.1f} % ({len(rows)} folds)")
 json.dump({"totals": totals, "rows": rows}, open(sys.argv[1], "w"), indent=1)
 ' "$dir/kept-eval${sym:+-${sym//,/-}}.json"
