@@ -15,7 +15,7 @@ cargo build --release --bin multifit-train
 for protocol in $protocols; do
   for loss in $losses; do
     epochs=150
-    [ "$protocol" = augment ] && epochs=60
+    [ "$protocol" != vanilla ] && epochs=60
     epochs=${EPOCHS:-$epochs}
     ./target/release/multifit-train cv --data "$data" --protocol "$protocol" --loss "$loss" \
       --embed-dim 5 --width 128 --depth 12 --lr 1e-3 --schedule cosine --epochs "$epochs" --k-max 8 \

@@ -147,21 +147,25 @@ impl ModelCard {
         }
         symmetry::check(&self.test_symmetries, self.kind)
             .map_err(|e| format!("test_symmetries: {e}"))?;
-        let mut files = vec![WEIGHTS_FILE];
-        for m in &self.members {
-            let plain = Path::new(&m.weights).file_name() == Some(m.weights.as_ref());
-            if !plain || !m.weights.ends_with(".safetensors") {
+        let files: Vec<&str> = self.weight_files().collect();
+        for (i, file) in files.iter().enumerate().skip(1) {
+            let plain = Path::new(file).file_name() == Some(file.as_ref());
+            if !plain || !file.ends_with(".safetensors") {
                 return Err(format!(
-                    "members: weights {:?} must be a plain .safetensors file name",
-                    m.weights
+                    "members: weights {file:?} must be a plain .safetensors file name"
                 ));
             }
-            if files.contains(&m.weights.as_str()) {
-                return Err(format!("members: weights {:?} named twice", m.weights));
+            if files[..i].contains(file) {
+                return Err(format!("members: weights {file:?} named twice"));
             }
-            files.push(&m.weights);
         }
         self.architecture.validate().map_err(|e| e.to_string())
+    }
+
+    /// The weight files of the model's networks, relative to its directory: the card's own
+    /// network ([`WEIGHTS_FILE`]) first, then each member's.
+    pub fn weight_files(&self) -> impl Iterator<Item = &str> {
+        std::iter::once(WEIGHTS_FILE).chain(self.members.iter().map(|m| m.weights.as_str()))
     }
 
     pub fn read(dir: &Path) -> Result<Self, RegistryError> {
@@ -237,10 +241,10 @@ impl LoadedModel {
         let device = cpu_device();
         let net = EmbeddingNet::load(&card.architecture, &dir.join(WEIGHTS_FILE), &device)?;
         let members = card
-            .members
-            .iter()
-            .map(|m| {
-                let net = EmbeddingNet::load(&card.architecture, &dir.join(&m.weights), &device)?;
+            .weight_files()
+            .skip(1)
+            .map(|file| {
+                let net = EmbeddingNet::load(&card.architecture, &dir.join(file), &device)?;
                 FusedNet::from_net(&net)
             })
             .collect::<Result<Vec<_>, _>>()?;
@@ -391,7 +395,7 @@ impl LoadedModel {
     }
 
     /// [`LoadedModel::fit`] with the given test symmetries instead of the card's (`&[]`: the
-    /// input alone, one forward pass).
+    /// input alone, one forward pass per network).
     pub fn fit_with(
         &self,
         points: &PointSet,
@@ -421,8 +425,11 @@ impl LoadedModel {
 
 /// Writes to `out` a model named `name` that embeds with every model in `dirs` (an ensemble):
 /// the first model's card and weights, and the others as its members (`weights-<i>.safetensors`).
-/// The models must share kind, input, normalisation and architecture, and be single networks.
-/// The first card's metrics are dropped: they measured that network alone.
+/// The models must be distinct single networks sharing kind, input, normalisation, architecture
+/// and test symmetries. The first card's metrics are dropped: they measured that network alone;
+/// its K defaults are kept. The model is written beside `out`, loaded to check it, and only then
+/// put in `out`'s place (which must be absent, empty or a model directory), so a failure never
+/// leaves a half-written model behind.
 pub fn write_ensemble(
     dirs: &[PathBuf],
     out: &Path,
@@ -440,6 +447,8 @@ pub fn write_ensemble(
         .map(|d| ModelCard::read(d))
         .collect::<Result<Vec<_>, _>>()?;
     let first = &cards[0];
+    let out_path = out.canonicalize().ok();
+    let mut seen = Vec::new();
     for (dir, card) in dirs.iter().zip(&cards) {
         if !card.members.is_empty() {
             return Err(fail(format!("{} is itself an ensemble", dir.display())));
@@ -449,25 +458,32 @@ pub fn write_ensemble(
             card.input_dim,
             card.normalization,
             &card.architecture,
+            &card.test_symmetries,
         ) == (
             first.kind,
             first.input_dim,
             first.normalization,
             &first.architecture,
+            &first.test_symmetries,
         );
         if !same {
             return Err(fail(format!(
-                "{} differs from {} in kind, input, normalisation or architecture",
+                "{} differs from {} in kind, input, normalisation, architecture or test symmetries",
                 dir.display(),
                 dirs[0].display()
             )));
         }
-        if dir.canonicalize().ok() == out.canonicalize().ok() {
+        let path = dir.canonicalize().ok();
+        if path.is_some() && path == out_path {
             return Err(fail(format!(
                 "{} is both a member and the output",
                 dir.display()
             )));
         }
+        if path.is_some() && seen.contains(&path) {
+            return Err(fail(format!("{} is named twice", dir.display())));
+        }
+        seen.push(path);
     }
     let mut card = first.clone();
     card.name = name.to_string();
@@ -489,15 +505,47 @@ pub fn write_ensemble(
         let path = path.to_path_buf();
         move |source| RegistryError::Io { path, source }
     };
-    std::fs::create_dir_all(out).map_err(io(out))?;
-    let files =
-        std::iter::once(WEIGHTS_FILE).chain(card.members.iter().map(|m| m.weights.as_str()));
-    for (dir, file) in dirs.iter().zip(files) {
-        let from = dir.join(WEIGHTS_FILE);
-        std::fs::copy(&from, out.join(file)).map_err(io(&from))?;
+    let replaceable = match std::fs::read_dir(out) {
+        Ok(mut entries) => entries.next().is_none() || out.join(CARD_FILE).is_file(),
+        Err(e) => e.kind() == std::io::ErrorKind::NotFound,
+    };
+    if !replaceable {
+        return Err(fail(format!(
+            "{} exists and is not a model directory",
+            out.display()
+        )));
     }
-    card.write(out).map_err(io(&out.join(CARD_FILE)))?;
-    Ok(card)
+    let staging = sibling(out, "partial");
+    let _ = std::fs::remove_dir_all(&staging);
+    std::fs::create_dir_all(&staging).map_err(io(&staging))?;
+    for (dir, file) in dirs.iter().zip(card.weight_files()) {
+        // Read and write rather than copy: a copy would keep the source's permissions.
+        let from = dir.join(WEIGHTS_FILE);
+        let bytes = std::fs::read(&from).map_err(io(&from))?;
+        std::fs::write(staging.join(file), bytes).map_err(io(&staging.join(file)))?;
+    }
+    card.write(&staging).map_err(io(&staging.join(CARD_FILE)))?;
+    let installed = LoadedModel::load(&staging).and_then(|_| {
+        let old = sibling(out, "old");
+        let _ = std::fs::remove_dir_all(&old);
+        if out.exists() {
+            std::fs::rename(out, &old).map_err(io(out))?;
+        }
+        std::fs::rename(&staging, out).map_err(io(out))?;
+        let _ = std::fs::remove_dir_all(&old);
+        Ok(())
+    });
+    if installed.is_err() {
+        let _ = std::fs::remove_dir_all(&staging);
+    }
+    installed.map(|()| card)
+}
+
+/// `dir` with `.<tag>` appended to its last component: a scratch directory beside it.
+fn sibling(dir: &Path, tag: &str) -> PathBuf {
+    let mut name = dir.file_name().unwrap_or_default().to_os_string();
+    name.push(format!(".{tag}"));
+    dir.with_file_name(name)
 }
 
 /// Every model under a directory, by name. Fails on the first directory that cannot be loaded,
@@ -780,5 +828,81 @@ mod tests {
         assert!(card.validate().unwrap_err().contains("named twice"));
         card.members = vec![member("w1.safetensors"), member("w2.safetensors")];
         card.validate().unwrap();
+    }
+
+    #[test]
+    fn ensembles_replace_a_model_whole_and_refuse_other_outputs() {
+        let tmp = TempDir::new("ensemble-out");
+        let (a, b) = (tiny_seeded(vec![], 7), tiny_seeded(vec![], 8));
+        let dirs = [tmp.path().join("a"), tmp.path().join("b")];
+        save(&a, &dirs[0]);
+        save(&b, &dirs[1]);
+        let out = tmp.path().join("e");
+        let refuse = |dirs: &[PathBuf], out: &Path| write_ensemble(dirs, out, "e").unwrap_err();
+
+        // The same model twice, even by another path, is not an ensemble.
+        let again = tmp.path().join(".").join("a");
+        let err = refuse(&[dirs[0].clone(), again], &out);
+        assert!(err.to_string().contains("named twice"), "{err}");
+        // Networks that would be served with different test symmetries.
+        let mut mirrored = tiny_seeded(vec![], 9);
+        mirrored.card.test_symmetries = vec![Symmetry::Mirror];
+        save(&mirrored, &tmp.path().join("m"));
+        let err = refuse(&[dirs[0].clone(), tmp.path().join("m")], &out);
+        assert!(err.to_string().contains("test symmetries"), "{err}");
+        // A directory that holds something other than a model is never replaced.
+        let other = tmp.path().join("other");
+        std::fs::create_dir_all(&other).unwrap();
+        std::fs::write(other.join("notes.txt"), b"keep me").unwrap();
+        let err = refuse(&dirs, &other);
+        assert!(err.to_string().contains("not a model directory"), "{err}");
+        assert!(other.join("notes.txt").is_file());
+        assert!(!out.exists());
+
+        // A model directory is replaced whole: the old card's stale member file goes with it.
+        write_ensemble(&dirs, &out, "e").unwrap();
+        std::fs::write(out.join("weights-9.safetensors"), b"stale").unwrap();
+        let card = write_ensemble(&[dirs[1].clone(), dirs[0].clone()], &out, "e").unwrap();
+        assert_eq!(card.training.seed, 8);
+        assert!(!out.join("weights-9.safetensors").exists());
+        assert!(!tmp.path().join("e.partial").exists() && !tmp.path().join("e.old").exists());
+        LoadedModel::load(&out).unwrap();
+        // An ensemble is not a member of another.
+        let err = refuse(&[out.clone(), dirs[0].clone()], &tmp.path().join("f"));
+        assert!(err.to_string().contains("itself an ensemble"), "{err}");
+
+        // A member whose weights do not load leaves the existing model untouched.
+        let before = std::fs::read(out.join(WEIGHTS_FILE)).unwrap();
+        std::fs::write(dirs[1].join(WEIGHTS_FILE), b"truncated").unwrap();
+        refuse(&dirs, &out);
+        assert_eq!(std::fs::read(out.join(WEIGHTS_FILE)).unwrap(), before);
+        assert!(!tmp.path().join("e.partial").exists());
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn ensemble_weights_do_not_keep_private_source_permissions() {
+        use std::os::unix::fs::PermissionsExt;
+        let tmp = TempDir::new("ensemble-mode");
+        let dirs = [tmp.path().join("a"), tmp.path().join("b")];
+        save(&tiny_seeded(vec![], 7), &dirs[0]);
+        save(&tiny_seeded(vec![], 8), &dirs[1]);
+        for d in &dirs {
+            let w = d.join(WEIGHTS_FILE);
+            std::fs::set_permissions(&w, std::fs::Permissions::from_mode(0o600)).unwrap();
+        }
+        let out = tmp.path().join("e");
+        let card = write_ensemble(&dirs, &out, "e").unwrap();
+        // The mode of a new file under this process's umask (0644 under the usual 022).
+        let probe = tmp.path().join("probe");
+        std::fs::write(&probe, b"").unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode();
+        for file in card.weight_files() {
+            assert_eq!(
+                mode(&out.join(file)),
+                mode(&probe),
+                "{file}, not the source's 600"
+            );
+        }
     }
 }

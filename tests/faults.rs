@@ -71,6 +71,22 @@ fn missing_weights() {
 }
 
 #[test]
+fn missing_ensemble_member_weights() {
+    let dir = temp("nomember");
+    let m = copy_model("lce", &dir);
+    let card_path = m.join("model.json");
+    let mut card: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&card_path).unwrap()).unwrap();
+    card["members"] = serde_json::json!([{
+        "weights": "weights-1.safetensors",
+        "loss": card["loss"].clone(),
+        "training": card["training"].clone(),
+    }]);
+    std::fs::write(&card_path, serde_json::to_vec(&card).unwrap()).unwrap();
+    expect_refusal(&dir, "weights-1.safetensors");
+}
+
+#[test]
 fn card_that_disagrees_with_the_weights() {
     let dir = temp("mismatch");
     let m = copy_model("lce", &dir);

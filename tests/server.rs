@@ -88,6 +88,45 @@ fn fits_a_real_kt3dmoseg_sequence() {
     let m = server.post_json("/v1/fit", &body);
     assert_eq!(m.status, 200, "{}", m.text());
     assert_eq!(labels(&m.json()), labels(&known.json()));
+
+    // The shipped kt3dmoseg is an ensemble: each row sets the networks' unit embeddings side by
+    // side, scaled to unit length, with or without the (empty) test symmetries.
+    let card: Value = serde_json::from_slice(
+        &std::fs::read(common::repo().join("models/kt3dmoseg/model.json")).unwrap(),
+    )
+    .unwrap();
+    let networks = 1 + card["members"].as_array().map_or(0, Vec::len);
+    assert!(networks > 1, "kt3dmoseg ships as an ensemble");
+    let e = card["architecture"]["embed_dim"].as_u64().unwrap() as usize;
+    for flag in [true, false] {
+        let r = server.post_json(
+            "/v1/fit",
+            &fit_body(
+                &file,
+                json!({"k": file["num_models"], "return_embeddings": true, "test_symmetries": flag}),
+            ),
+        );
+        assert_eq!(r.status, 200, "{}", r.text());
+        let z = r.json();
+        let rows = z["embeddings"].as_array().unwrap();
+        assert_eq!(rows.len(), n);
+        for row in rows {
+            let row: Vec<f64> = row
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect();
+            assert_eq!(row.len(), e * networks);
+            let norm: f64 = row.iter().map(|x| x * x).sum();
+            assert!((norm - 1.0).abs() < 1e-3, "unit rows: {norm}");
+            // Every network's block has length 1/sqrt(networks).
+            for block in row.chunks(e) {
+                let b: f64 = block.iter().map(|x| x * x).sum();
+                assert!((b * networks as f64 - 1.0).abs() < 1e-3, "block {b}");
+            }
+        }
+    }
 }
 
 #[test]

@@ -309,6 +309,70 @@ fn train_then_eval_on_kt3dmoseg_clips() {
     ]);
     assert!(!alone.status.success());
     assert!(String::from_utf8_lossy(&alone.stderr).contains("at least two"));
+
+    // Refused, each with its reason: a warm start from an ensemble (which network?), a
+    // recorded metric measured with other test symmetries than the card's, and the leaky
+    // diagnostic protocol outside cross-validation.
+    let (warm, leaky) = (temp("kt-warm"), temp("kt-leaky"));
+    let refusals: [(Vec<&str>, &str); 3] = [
+        (
+            [
+                &[
+                    "train",
+                    "--name",
+                    "w",
+                    "--data",
+                    s(&data),
+                    "--protocol",
+                    "augment",
+                ][..],
+                &TINY[..],
+                &["--init", s(&both), "--out", s(&warm)][..],
+            ]
+            .concat(),
+            "ensemble of 2",
+        ),
+        (
+            vec![
+                "eval",
+                "--model",
+                s(&both),
+                "--data",
+                s(&first5),
+                "--test-symmetry",
+                "mirror",
+                "--record",
+                "x",
+            ],
+            "--record",
+        ),
+        (
+            [
+                &[
+                    "train",
+                    "--name",
+                    "l",
+                    "--data",
+                    s(&data),
+                    "--protocol",
+                    "augment-leaky",
+                ][..],
+                &TINY[..],
+                &["--out", s(&leaky)][..],
+            ]
+            .concat(),
+            "cv only",
+        ),
+    ];
+    for (args, reason) in refusals {
+        let out = run(&args);
+        assert!(!out.status.success(), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(reason), "{args:?}: {err}");
+    }
+    let card_after: Value =
+        serde_json::from_slice(&std::fs::read(both.join("model.json")).unwrap()).unwrap();
+    assert_eq!(card_after, card, "a refused eval leaves the card alone");
 }
 
 #[test]

@@ -379,6 +379,11 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
     let seqs = a.data.sequences()?;
     let kind = seqs[0].points.kind();
     let plan = a.train.samples(a.data.clip_len, kind)?;
+    if plan.protocol == Protocol::AugmentLeaky {
+        bail!(
+            "--protocol augment-leaky is a cross-validation diagnostic (cv only); train has no held-out sequence"
+        );
+    }
     let train_samples: Vec<Sample> = seqs.iter().flat_map(|s| plan.train_samples(s)).collect();
     let val_samples = match &a.val {
         Some(p) => {
@@ -526,6 +531,13 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
 /// The weights file and card of the `--init` model, checked against the architecture to train.
 fn init_card(dir: &Path, config: &TrainConfig) -> Result<(PathBuf, ModelCard)> {
     let card = ModelCard::read(dir)?;
+    if !card.members.is_empty() {
+        bail!(
+            "{}: --init needs a single network; this model is an ensemble of {}",
+            dir.display(),
+            card.members.len() + 1
+        );
+    }
     if card.architecture != config.model {
         bail!(
             "{}: --init needs the same architecture as the flags give; the model has {:?}, the flags {:?}",
@@ -549,6 +561,11 @@ fn eval_samples(seqs: &[Sequence], input_dim: usize) -> Vec<Sample> {
 fn eval_cmd(a: EvalCmd) -> Result<()> {
     let mut model = LoadedModel::load(&a.model)?;
     if let Some(list) = a.test_symmetry {
+        if a.record.is_some() {
+            bail!(
+                "--record stores a metric of the model as served, with its card's test symmetries: drop --test-symmetry"
+            );
+        }
         check_symmetries("--test-symmetry", &list, model.card.kind)?;
         model.card.test_symmetries = list;
     }

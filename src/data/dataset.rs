@@ -190,9 +190,11 @@ impl Sequence {
     /// [`Sequence::clips`] whose first clip starts at frame `first` (0-based) instead of 0.
     pub fn clips_from(&self, first: usize, len: usize, stride: usize) -> Vec<Sample> {
         let (len, stride) = (len.max(1), stride.max(1));
-        (0..)
-            .map(|c| first + c * stride)
-            .take_while(|start| start + len <= self.frames())
+        let Some(last) = self.frames().checked_sub(len) else {
+            return vec![];
+        };
+        (first..=last)
+            .step_by(stride)
             .filter_map(|start| self.clip(start, len))
             .collect()
     }
@@ -299,6 +301,10 @@ mod tests {
         assert_eq!(later.len(), 1);
         assert_eq!(later[0].name, second.name);
         assert!(seq.clips_from(3, 2, 1).is_empty());
+        // Strides and starts past the end give what fits, never an overflow.
+        assert_eq!(seq.clips(2, usize::MAX).len(), 1);
+        assert!(seq.clips_from(usize::MAX, 2, 1).is_empty());
+        assert!(seq.clips(5, 1).is_empty());
     }
 
     #[test]

@@ -198,7 +198,10 @@ pub fn run_fold(
     );
     let outcome = train(&spec.train, &prepared, &[], Hooks::default())?;
     let info = TrainingInfo {
-        data: format!("fold without {name}"),
+        data: match spec.samples.protocol {
+            Protocol::AugmentLeaky => format!("fold of {name}, with its clips after the test clip"),
+            _ => format!("fold without {name}"),
+        },
         command: String::new(),
         epochs: spec.train.epochs,
         learning_rate: spec.train.learning_rate,
