@@ -76,38 +76,28 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
           --data runs/data/lce2-train-d --data runs/data/lce2-unmixed-train-d \
           --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed 2 \
           --describe "Synthetic LCE at scale 2: 16000 new mixed + 16000 new unmixed samples (seeds 31, 32), $common"
-        $T train --name lce --init runs/lce-stage3/model --out runs/lce-stage4/model --run-dir runs/lce-stage4 \
-          --data runs/data/lce2-train-e --data runs/data/lce2-unmixed-train-e \
-          --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed 3 \
-          --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds 41, 42), $common"
+        # Stages 4 on: a warm restart of the stage before over 3 epochs of 12000 + 12000 new samples.
+        # restart STAGE SEED SET "GENERATOR SEEDS" OUT [FLAGS]
+        restart() {
+          local n=$1 seed=$2 set=$3 seeds=$4 out=$5
+          shift 5
+          $T train --name lce --init "runs/lce-stage$((n - 1))/model" --out "$out" --run-dir "runs/lce-stage$n" \
+            --data "runs/data/lce2-train-$set" --data "runs/data/lce2-unmixed-train-$set" \
+            --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed "$seed" "$@" \
+            --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds $seeds), $common"
+        }
+        restart 4 3 e "41, 42" runs/lce-stage4/model
+        restart 5 4 f "51, 52" runs/lce-stage5/model
         # Test symmetries (mirror x quarter turns, 8 images per fit), chosen on the validation
         # samples (docs/RESULTS.md, "Test-time symmetries").
-        $T train --name lce --init runs/lce-stage4/model --out runs/lce-stage5/model --run-dir runs/lce-stage5 \
-          --data runs/data/lce2-train-f --data runs/data/lce2-unmixed-train-f \
-          --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed 4 \
-          --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds 51, 52), $common"
-        $T train --name lce --init runs/lce-stage5/model --out runs/lce-stage6/model --run-dir runs/lce-stage6 \
-          --data runs/data/lce2-train-g --data runs/data/lce2-unmixed-train-g \
-          --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed 5 --test-symmetry mirror,rotate \
-          --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds 61, 62), $common"
+        sym=(--test-symmetry mirror,rotate)
+        restart 6 5 g "61, 62" runs/lce-stage6/model "${sym[@]}"
         # Stages 7 to 10 were each kept over the stage before on 500 validation samples with the
         # test symmetries (seeds 3 and 81: 20.07 against 20.45 %, then 19.86, 19.54 and 19.42 %).
-        $T train --name lce --init runs/lce-stage6/model --out runs/lce-stage7/model --run-dir runs/lce-stage7 \
-          --data runs/data/lce2-train-h --data runs/data/lce2-unmixed-train-h \
-          --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed 6 --test-symmetry mirror,rotate \
-          --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds 71, 72), $common"
-        $T train --name lce --init runs/lce-stage7/model --out runs/lce-stage8/model --run-dir runs/lce-stage8 \
-          --data runs/data/lce2-train-i --data runs/data/lce2-unmixed-train-i \
-          --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed 7 --test-symmetry mirror,rotate \
-          --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds 91, 92), $common"
-        $T train --name lce --init runs/lce-stage8/model --out runs/lce-stage9/model --run-dir runs/lce-stage9 \
-          --data runs/data/lce2-train-j --data runs/data/lce2-unmixed-train-j \
-          --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed 8 --test-symmetry mirror,rotate \
-          --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds 101, 102), $common"
-        $T train --name lce --init runs/lce-stage9/model --run-dir runs/lce-stage10 \
-          --data runs/data/lce2-train-k --data runs/data/lce2-unmixed-train-k \
-          --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed 9 --test-symmetry mirror,rotate \
-          --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds 111, 112), $common" ;;
+        restart 7 6 h "71, 72" runs/lce-stage7/model "${sym[@]}"
+        restart 8 7 i "91, 92" runs/lce-stage8/model "${sym[@]}"
+        restart 9 8 j "101, 102" runs/lce-stage9/model "${sym[@]}"
+        restart 10 9 k "111, 112" models/lce "${sym[@]}" ;;
       *) echo "unknown model $m" >&2; exit 2 ;;
     esac
   done

@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{Server, dataset, labels, truth};
+use common::{Server, dataset, embeddings, labels, truth};
 use multifit::data::synthetic::{LceConfig, LceGenerator, LceVariant};
 use multifit::metrics::error_rate;
 use serde_json::{Value, json};
@@ -107,16 +107,9 @@ fn fits_a_real_kt3dmoseg_sequence() {
             ),
         );
         assert_eq!(r.status, 200, "{}", r.text());
-        let z = r.json();
-        let rows = z["embeddings"].as_array().unwrap();
+        let rows = embeddings(&r.json());
         assert_eq!(rows.len(), n);
         for row in rows {
-            let row: Vec<f64> = row
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_f64().unwrap())
-                .collect();
             assert_eq!(row.len(), e * networks);
             let norm: f64 = row.iter().map(|x| x * x).sum();
             assert!((norm - 1.0).abs() < 1e-3, "unit rows: {norm}");
@@ -150,15 +143,12 @@ fn fits_real_adelaide_pairs_with_each_model() {
         assert_eq!(v["model"]["name"], model);
         check_fit(&v, n);
         assert_eq!(v["selection"], "silhouette");
-        let emb = v["embeddings"].as_array().unwrap();
+        let emb = embeddings(&v);
         assert_eq!(emb.len(), n);
-        let norm: f64 = emb[0]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap().powi(2))
-            .sum();
-        assert!((norm - 1.0).abs() < 1e-3, "embeddings are unit length");
+        for row in emb {
+            let norm: f64 = row.iter().map(|x| x * x).sum();
+            assert!((norm - 1.0).abs() < 1e-3, "embeddings are unit length");
+        }
     }
 }
 
@@ -219,13 +209,7 @@ fn fits_a_generated_lce_sample_invariant_to_scale() {
         assert_eq!(r.status, 200, "{}", r.text());
         let z = r.json();
         check_fit(&z, rows.len());
-        for row in z["embeddings"].as_array().unwrap() {
-            let row: Vec<f64> = row
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_f64().unwrap())
-                .collect();
+        for row in embeddings(&z) {
             assert_eq!(row.len(), width, "test_symmetries {flag}");
             let norm = row.iter().map(|x| x * x).sum::<f64>().sqrt();
             assert!((norm - 1.0).abs() < 1e-3, "unit rows, got {norm}");

@@ -209,6 +209,22 @@ pub fn dataset(rel: &str) -> Value {
 }
 
 /// Labels of a fit answer.
+/// A fit answer's `embeddings`, one row per point.
+pub fn embeddings(v: &Value) -> Vec<Vec<f64>> {
+    v["embeddings"]
+        .as_array()
+        .expect("embeddings")
+        .iter()
+        .map(|row| {
+            row.as_array()
+                .expect("an embedding row")
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect()
+        })
+        .collect()
+}
+
 pub fn labels(v: &Value) -> Vec<usize> {
     v["labels"]
         .as_array()
