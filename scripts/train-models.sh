@@ -48,20 +48,6 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         gen lce2-unmixed-train-c --count 20000 --seed 22 --variant unmixed
         gen lce2-train-d --count 16000 --seed 31 --variant mixed
         gen lce2-unmixed-train-d --count 16000 --seed 32 --variant unmixed
-        gen lce2-train-e --count 12000 --seed 41 --variant mixed
-        gen lce2-unmixed-train-e --count 12000 --seed 42 --variant unmixed
-        gen lce2-train-f --count 12000 --seed 51 --variant mixed
-        gen lce2-unmixed-train-f --count 12000 --seed 52 --variant unmixed
-        gen lce2-train-g --count 12000 --seed 61 --variant mixed
-        gen lce2-unmixed-train-g --count 12000 --seed 62 --variant unmixed
-        gen lce2-train-h --count 12000 --seed 71 --variant mixed
-        gen lce2-unmixed-train-h --count 12000 --seed 72 --variant unmixed
-        gen lce2-train-i --count 12000 --seed 91 --variant mixed
-        gen lce2-unmixed-train-i --count 12000 --seed 92 --variant unmixed
-        gen lce2-train-j --count 12000 --seed 101 --variant mixed
-        gen lce2-unmixed-train-j --count 12000 --seed 102 --variant unmixed
-        gen lce2-train-k --count 12000 --seed 111 --variant mixed
-        gen lce2-unmixed-train-k --count 12000 --seed 112 --variant unmixed
         common="50 points per shape, noise 0.05; validation 100 mixed samples (seed 3)"
         net="--loss l2 --embed-dim 6 --width 128 --depth 12 --neighbors 16 --graph-neighbors 16 --batch-size 16 --schedule cosine --k-max 6"
         $T train --name lce --out runs/lce-stage1/model --run-dir runs/lce-stage1 \
@@ -76,28 +62,31 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
           --data runs/data/lce2-train-d --data runs/data/lce2-unmixed-train-d \
           --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed 2 \
           --describe "Synthetic LCE at scale 2: 16000 new mixed + 16000 new unmixed samples (seeds 31, 32), $common"
-        # Stages 4 on: a warm restart of the stage before over 3 epochs of 12000 + 12000 new samples.
-        # restart STAGE SEED SET "GENERATOR SEEDS" OUT [FLAGS]
+        # Stages 4 on: a warm restart of the stage before over 3 epochs of 12000 + 12000 new samples,
+        # generated with seeds MIXED_SEED and MIXED_SEED + 1; training seed STAGE - 1.
+        # restart STAGE SET MIXED_SEED OUT [FLAGS]
         restart() {
-          local n=$1 seed=$2 set=$3 seeds=$4 out=$5
-          shift 5
+          local n=$1 set=$2 s=$3 out=$4
+          shift 4
+          gen "lce2-train-$set" --count 12000 --seed "$s" --variant mixed
+          gen "lce2-unmixed-train-$set" --count 12000 --seed "$((s + 1))" --variant unmixed
           $T train --name lce --init "runs/lce-stage$((n - 1))/model" --out "$out" --run-dir "runs/lce-stage$n" \
             --data "runs/data/lce2-train-$set" --data "runs/data/lce2-unmixed-train-$set" \
-            --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed "$seed" "$@" \
-            --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds $seeds), $common"
+            --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed "$((n - 1))" "$@" \
+            --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds $s, $((s + 1))), $common"
         }
-        restart 4 3 e "41, 42" runs/lce-stage4/model
-        restart 5 4 f "51, 52" runs/lce-stage5/model
+        restart 4 e 41 runs/lce-stage4/model
+        restart 5 f 51 runs/lce-stage5/model
         # Test symmetries (mirror x quarter turns, 8 images per fit), chosen on the validation
         # samples (docs/RESULTS.md, "Test-time symmetries").
         sym=(--test-symmetry mirror,rotate)
-        restart 6 5 g "61, 62" runs/lce-stage6/model "${sym[@]}"
+        restart 6 g 61 runs/lce-stage6/model "${sym[@]}"
         # Stages 7 to 10 were each kept over the stage before on 500 validation samples with the
         # test symmetries (seeds 3 and 81: 20.07 against 20.45 %, then 19.86, 19.54 and 19.42 %).
-        restart 7 6 h "71, 72" runs/lce-stage7/model "${sym[@]}"
-        restart 8 7 i "91, 92" runs/lce-stage8/model "${sym[@]}"
-        restart 9 8 j "101, 102" runs/lce-stage9/model "${sym[@]}"
-        restart 10 9 k "111, 112" models/lce "${sym[@]}" ;;
+        restart 7 h 71 runs/lce-stage7/model "${sym[@]}"
+        restart 8 i 91 runs/lce-stage8/model "${sym[@]}"
+        restart 9 j 101 runs/lce-stage9/model "${sym[@]}"
+        restart 10 k 111 models/lce "${sym[@]}" ;;
       *) echo "unknown model $m" >&2; exit 2 ;;
     esac
   done
