@@ -741,13 +741,19 @@ mod tests {
         model.net.save(&dir.join(WEIGHTS_FILE)).unwrap();
     }
 
-    #[test]
-    fn an_ensemble_sets_every_network_of_every_image_side_by_side() {
-        let tmp = TempDir::new("ensemble");
+    /// Two tiny single-network models of different seeds (7, 8), saved in `<tmp>/a` and `<tmp>/b`.
+    fn two_saved_models(tmp: &TempDir) -> (LoadedModel, LoadedModel, [PathBuf; 2]) {
         let (a, b) = (tiny_seeded(vec![], 7), tiny_seeded(vec![], 8));
         let dirs = [tmp.path().join("a"), tmp.path().join("b")];
         save(&a, &dirs[0]);
         save(&b, &dirs[1]);
+        (a, b, dirs)
+    }
+
+    #[test]
+    fn an_ensemble_sets_every_network_of_every_image_side_by_side() {
+        let tmp = TempDir::new("ensemble");
+        let (a, b, dirs) = two_saved_models(&tmp);
         let out = tmp.path().join("both");
         let card = write_ensemble(&dirs, &out, "both").unwrap();
         assert_eq!(card.name, "both");
@@ -833,10 +839,7 @@ mod tests {
     #[test]
     fn ensembles_replace_a_model_whole_and_refuse_other_outputs() {
         let tmp = TempDir::new("ensemble-out");
-        let (a, b) = (tiny_seeded(vec![], 7), tiny_seeded(vec![], 8));
-        let dirs = [tmp.path().join("a"), tmp.path().join("b")];
-        save(&a, &dirs[0]);
-        save(&b, &dirs[1]);
+        let (_, _, dirs) = two_saved_models(&tmp);
         let out = tmp.path().join("e");
         let refuse = |dirs: &[PathBuf], out: &Path| write_ensemble(dirs, out, "e").unwrap_err();
 
