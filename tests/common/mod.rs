@@ -208,7 +208,6 @@ pub fn dataset(rel: &str) -> Value {
     .unwrap()
 }
 
-/// Labels of a fit answer.
 /// A fit answer's `embeddings`, one row per point.
 pub fn embeddings(v: &Value) -> Vec<Vec<f64>> {
     v["embeddings"]
@@ -225,6 +224,7 @@ pub fn embeddings(v: &Value) -> Vec<Vec<f64>> {
         .collect()
 }
 
+/// Labels of a fit answer.
 pub fn labels(v: &Value) -> Vec<usize> {
     v["labels"]
         .as_array()
