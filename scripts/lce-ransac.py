@@ -159,6 +159,19 @@ def error_rate(truth: np.ndarray, pred: np.ndarray) -> float:
     return 1.0 - c[r, cidx].sum() / len(truth)
 
 
+def nmi(truth: np.ndarray, pred: np.ndarray) -> float:
+    """I(T; P) / ((H(T) + H(P)) / 2), the arithmetic normalisation of src/metrics.rs."""
+    c = np.zeros((truth.max() + 1, pred.max() + 1))
+    np.add.at(c, (truth, pred), 1)
+    pxy = c / c.sum()
+    px, py = pxy.sum(1), pxy.sum(0)
+    nz = pxy > 0
+    mi = (pxy[nz] * np.log(pxy[nz] / np.outer(px, py)[nz])).sum()
+    h = lambda q: -(q[q > 0] * np.log(q[q > 0])).sum()
+    denom = (h(px) + h(py)) / 2
+    return 1.0 if denom <= 0 else float(np.clip(mi / denom, 0.0, 1.0))
+
+
 SHAPES = re.compile(r"shapes \[([A-Za-z, ]+)\]")
 
 
@@ -174,7 +187,7 @@ def main() -> None:
         raise SystemExit(f"{a.data}: no .json samples")
     rng = np.random.default_rng(a.seed)
     order = {"line": 0, "circle": 1, "ellipse": 2}
-    errors = []
+    errors, nmis = [], []
     for f in files:
         s = json.loads(f.read_text())
         p = np.asarray(s["points"], dtype=float)
@@ -194,11 +207,14 @@ def main() -> None:
             sampson(c[None], p)[0] if not np.isnan(c).any() else np.full(len(p), np.inf)
             for c in conics
         ])
-        errors.append(error_rate(truth, res.argmin(0)))
+        pred = res.argmin(0)
+        errors.append(error_rate(truth, pred))
+        nmis.append(nmi(truth, pred))
     e = np.array(errors)
     print(f"{a.data}: {len(e)} samples, sequential RANSAC with true types and counts "
           f"({a.hypotheses} hypotheses, threshold {a.threshold})")
-    print(f"error mean {100 * e.mean():.2f} %, median {100 * np.median(e):.2f} %")
+    print(f"error mean {100 * e.mean():.2f} %, median {100 * np.median(e):.2f} %, "
+          f"NMI mean {np.mean(nmis):.3f}")
 
 
 if __name__ == "__main__":
