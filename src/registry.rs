@@ -202,6 +202,9 @@ pub struct LoadedModel {
     /// Threads one fit may use.
     threads: Threads,
     device: Device,
+    /// Hex SHA-256 of the weight files, concatenated in [`ModelCard::weight_files`] order;
+    /// `None` for a network that was never read from a file ([`LoadedModel::from_parts`]).
+    weights_sha256: Option<String>,
 }
 
 /// Why a fit request cannot be answered by this model.
@@ -248,9 +251,19 @@ impl LoadedModel {
                 FusedNet::from_net(&net)
             })
             .collect::<Result<Vec<_>, _>>()?;
+        let weights_sha256 = weights_sha256(dir, &card)?;
         let mut model = Self::assemble(card, net, device)?;
         model.members = members;
+        model.weights_sha256 = Some(weights_sha256);
         Ok(model)
+    }
+
+    /// Hex SHA-256 of the weight files the model was loaded from, concatenated in the card's
+    /// order (`cat weights.safetensors weights-1.safetensors ... | sha256sum`): the identity of
+    /// exactly these weights, which the card's `version` is not. `None` for a network built in
+    /// this process ([`LoadedModel::from_parts`]).
+    pub fn weights_sha256(&self) -> Option<&str> {
+        self.weights_sha256.as_deref()
     }
 
     /// Wraps a freshly trained network. Fits run on the calling thread until
@@ -280,6 +293,7 @@ impl LoadedModel {
             members: Vec::new(),
             threads: Threads::default(),
             device,
+            weights_sha256: None,
         })
     }
 
@@ -546,6 +560,19 @@ fn sibling(dir: &Path, tag: &str) -> PathBuf {
     let mut name = dir.file_name().unwrap_or_default().to_os_string();
     name.push(format!(".{tag}"));
     dir.with_file_name(name)
+}
+
+/// Hex SHA-256 of `dir`'s weight files, concatenated in [`ModelCard::weight_files`] order.
+fn weights_sha256(dir: &Path, card: &ModelCard) -> Result<String, RegistryError> {
+    use sha2::{Digest, Sha256};
+    let mut hasher = Sha256::new();
+    for file in card.weight_files() {
+        let path = dir.join(file);
+        std::fs::File::open(&path)
+            .and_then(|mut f| std::io::copy(&mut f, &mut hasher))
+            .map_err(|source| RegistryError::Io { path, source })?;
+    }
+    Ok(format!("{:x}", hasher.finalize()))
 }
 
 /// Every model under a directory, by name. Fails on the first directory that cannot be loaded,
@@ -907,5 +934,56 @@ mod tests {
                 "{file}, not the source's 600"
             );
         }
+    }
+
+    #[test]
+    fn the_weights_digest_is_the_sha256_of_the_weight_files_in_card_order() {
+        let tmp = TempDir::new("digest");
+        let mut card = tiny_seeded(vec![], 7).card;
+        std::fs::create_dir_all(tmp.path()).unwrap();
+        std::fs::write(tmp.path().join(WEIGHTS_FILE), b"abc").unwrap();
+        // `printf abc | sha256sum`
+        assert_eq!(
+            weights_sha256(tmp.path(), &card).unwrap(),
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+        std::fs::write(tmp.path().join("weights-1.safetensors"), b"def").unwrap();
+        card.members = vec![Member {
+            weights: "weights-1.safetensors".into(),
+            loss: card.loss,
+            training: card.training.clone(),
+        }];
+        // `printf abcdef | sha256sum`
+        assert_eq!(
+            weights_sha256(tmp.path(), &card).unwrap(),
+            "bef57ec7f53a6d40beb640a780a639c83bc29ac8a9816f1fc6c5c6dcd93c4721"
+        );
+        std::fs::remove_file(tmp.path().join("weights-1.safetensors")).unwrap();
+        assert!(matches!(
+            weights_sha256(tmp.path(), &card),
+            Err(RegistryError::Io { path, .. }) if path.ends_with("weights-1.safetensors")
+        ));
+    }
+
+    #[test]
+    fn a_loaded_model_reports_its_weights_digest_and_a_model_built_in_process_none() {
+        let tmp = TempDir::new("loaded-digest");
+        let (a, _, dirs) = two_saved_models(&tmp);
+        assert_eq!(a.weights_sha256(), None);
+        let loaded = LoadedModel::load(&dirs[0]).unwrap();
+        let other = LoadedModel::load(&dirs[1]).unwrap();
+        let digest = loaded.weights_sha256().unwrap();
+        assert_eq!(digest.len(), 64);
+        assert!(
+            digest
+                .bytes()
+                .all(|b| b.is_ascii_hexdigit() && !b.is_ascii_uppercase())
+        );
+        assert_ne!(Some(digest), other.weights_sha256());
+        let both = tmp.path().join("both");
+        write_ensemble(&dirs, &both, "both").unwrap();
+        let ensemble = LoadedModel::load(&both).unwrap();
+        assert_ne!(ensemble.weights_sha256(), Some(digest));
+        assert_ne!(ensemble.weights_sha256(), other.weights_sha256());
     }
 }

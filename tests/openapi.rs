@@ -67,6 +67,7 @@ fn fit_response_fields_match_the_schema() {
         model: ModelRef {
             name: "m".into(),
             version: "1".into(),
+            weights_sha256: Some("0".repeat(64)),
         },
         labels: vec![0, 1],
         k: 2,

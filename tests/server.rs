@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{Server, dataset, embeddings, labels, truth};
+use common::{Server, dataset, embeddings, labels, shipped_weights_sha256, truth};
 use multifit::data::synthetic::{LceConfig, LceGenerator, LceVariant};
 use multifit::metrics::error_rate;
 use serde_json::{Value, json};
@@ -60,6 +60,11 @@ fn fits_a_real_kt3dmoseg_sequence() {
     assert_eq!(auto.status, 200, "{}", auto.text());
     let v = auto.json();
     assert_eq!(v["model"]["name"], "kt3dmoseg");
+    // An ensemble of three networks: the digest covers all three weight files.
+    assert_eq!(
+        v["model"]["weights_sha256"],
+        shipped_weights_sha256("kt3dmoseg")
+    );
     let k = check_fit(&v, n);
     assert!((1..=8).contains(&k));
     assert_eq!(v["selection"], "sod");
@@ -480,6 +485,10 @@ fn models_health_metrics_and_openapi() {
         .iter()
         .map(|m| m["name"].as_str().unwrap())
         .collect();
+    for m in models["models"].as_array().unwrap() {
+        let name = m["name"].as_str().unwrap();
+        assert_eq!(m["weights_sha256"], shipped_weights_sha256(name), "{name}");
+    }
     for want in [
         "adelaide-fundamental",
         "adelaide-homography",

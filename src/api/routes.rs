@@ -322,8 +322,21 @@ async fn fit_batch(
 
 async fn list_models(State(state): State<Shared>) -> Result<Json<serde_json::Value>, ApiError> {
     let models = state.models()?;
-    let cards: Vec<_> = models.values().map(|m| &m.card).collect();
+    let cards = models
+        .values()
+        .map(|m| model_json(m))
+        .collect::<Result<Vec<_>, _>>()?;
     Ok(Json(json!({ "models": cards })))
+}
+
+/// A model's card with the SHA-256 of the weights it was loaded from beside it.
+fn model_json(model: &LoadedModel) -> Result<serde_json::Value, ApiError> {
+    let mut value =
+        serde_json::to_value(&model.card).map_err(|e| ApiError::internal(e.to_string()))?;
+    if let (Some(object), Some(sha)) = (value.as_object_mut(), model.weights_sha256()) {
+        object.insert("weights_sha256".into(), sha.into());
+    }
+    Ok(value)
 }
 
 async fn get_model(
@@ -336,9 +349,7 @@ async fn get_model(
     let model = models
         .get(&name)
         .ok_or_else(|| ApiError::not_found(format!("no model named {name:?}")))?;
-    serde_json::to_value(&model.card)
-        .map(Json)
-        .map_err(|e| ApiError::internal(e.to_string()))
+    model_json(model).map(Json)
 }
 
 async fn live() -> Json<serde_json::Value> {

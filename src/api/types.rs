@@ -225,6 +225,9 @@ fn check_size(n: usize, width: usize, limits: &Limits) -> Result<(), ApiError> {
 pub struct ModelRef {
     pub name: String,
     pub version: String,
+    /// Hex SHA-256 of the weight files that answered ([`LoadedModel::weights_sha256`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub weights_sha256: Option<String>,
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -275,6 +278,7 @@ impl FitResponse {
             model: ModelRef {
                 name: job.model.card.name.clone(),
                 version: job.model.card.version.clone(),
+                weights_sha256: job.model.weights_sha256().map(str::to_string),
             },
             labels,
             k,

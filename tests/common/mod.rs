@@ -208,6 +208,26 @@ pub fn dataset(rel: &str) -> Value {
     .unwrap()
 }
 
+/// Hex SHA-256 of a shipped model's weight files, concatenated in the order its card lists them
+/// (`weights.safetensors`, then each member's), read straight from `models/<name>/`.
+pub fn shipped_weights_sha256(name: &str) -> String {
+    use sha2::{Digest, Sha256};
+    let dir = repo().join("models").join(name);
+    let card: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("model.json")).unwrap()).unwrap();
+    let members = card["members"].as_array().cloned().unwrap_or_default();
+    let files = std::iter::once("weights.safetensors".to_string()).chain(
+        members
+            .iter()
+            .map(|m| m["weights"].as_str().unwrap().to_string()),
+    );
+    let mut hasher = Sha256::new();
+    for file in files {
+        hasher.update(std::fs::read(dir.join(file)).unwrap());
+    }
+    format!("{:x}", hasher.finalize())
+}
+
 /// A fit answer's `embeddings`, one row per point.
 pub fn embeddings(v: &Value) -> Vec<Vec<f64>> {
     v["embeddings"]
