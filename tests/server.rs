@@ -530,6 +530,11 @@ fn models_health_metrics_and_openapi() {
         text.contains("multifit_requests_total{endpoint=\"/v1/fit\",status=\"200\"} 1"),
         "{text}"
     );
+    let info = format!(
+        "multifit_model_info{{kind=\"trajectories\",name=\"kt3dmoseg\",version=\"1\",weights_sha256=\"{}\"}} 1",
+        shipped_weights_sha256("kt3dmoseg")
+    );
+    assert!(text.contains(&info), "{info} missing from {text}");
     let doc = server.get("/openapi.yaml");
     assert_eq!(doc.status, 200);
     assert!(doc.text().starts_with("openapi: 3"));

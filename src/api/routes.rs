@@ -61,7 +61,12 @@ impl AppState {
         for m in models.values() {
             self.telemetry
                 .model_info
-                .with_label_values(&[&m.card.name, &m.card.version, m.card.kind.as_str()])
+                .with_label_values(&[
+                    &m.card.name,
+                    &m.card.version,
+                    m.card.kind.as_str(),
+                    m.weights_sha256().unwrap_or_default(),
+                ])
                 .set(1);
         }
         let models = models.into_iter().map(|(k, v)| (k, Arc::new(v))).collect();

@@ -120,7 +120,7 @@ impl Telemetry {
         .expect("valid metric");
         let model_info = IntGaugeVec::new(
             Opts::new("multifit_model_info", "Loaded models (value 1)"),
-            &["name", "version", "kind"],
+            &["name", "version", "kind", "weights_sha256"],
         )
         .expect("valid metric");
         for c in [
