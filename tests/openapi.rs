@@ -88,6 +88,10 @@ fn fit_response_fields_match_the_schema() {
     let s = schema(&spec, "FitResponse");
     assert_eq!(keys(&s["properties"]), sent);
     assert_eq!(
+        keys(&s["properties"]["model"]["properties"]),
+        v["model"].as_object().unwrap().keys().cloned().collect()
+    );
+    assert_eq!(
         keys(&s["properties"]["timing_ms"]["properties"]),
         v["timing_ms"]
             .as_object()

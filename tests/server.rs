@@ -60,7 +60,7 @@ fn fits_a_real_kt3dmoseg_sequence() {
     assert_eq!(auto.status, 200, "{}", auto.text());
     let v = auto.json();
     assert_eq!(v["model"]["name"], "kt3dmoseg");
-    // An ensemble of three networks: the digest covers all three weight files.
+    // An ensemble: the digest covers every network's weight file.
     assert_eq!(
         v["model"]["weights_sha256"],
         shipped_weights_sha256("kt3dmoseg")

@@ -135,7 +135,12 @@ pub async fn serve(
                 for m in models.values() {
                     let sha = m.weights_sha256().unwrap_or_default();
                     let card = &m.card;
-                    tracing::info!(model = %card.name, version = %card.version, weights_sha256 = %sha, "model loaded");
+                    tracing::info!(
+                        model = %card.name,
+                        version = %card.version,
+                        weights_sha256 = %sha,
+                        "model loaded"
+                    );
                 }
                 let names: Vec<&String> = models.keys().collect();
                 tracing::info!(?names, fit_threads, "models loaded; ready");

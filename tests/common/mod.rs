@@ -216,7 +216,7 @@ pub fn shipped_weights_sha256(name: &str) -> String {
     let card: Value =
         serde_json::from_slice(&std::fs::read(dir.join("model.json")).unwrap()).unwrap();
     let members = card["members"].as_array().cloned().unwrap_or_default();
-    let files = std::iter::once("weights.safetensors".to_string()).chain(
+    let files = std::iter::once(multifit::registry::WEIGHTS_FILE.to_string()).chain(
         members
             .iter()
             .map(|m| m["weights"].as_str().unwrap().to_string()),
