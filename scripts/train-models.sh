@@ -37,7 +37,7 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         # Scale 2: the generator scale at which sequential RANSAC told the true types and counts
         # scores what the paper's Seq. baselines do (docs/RESULTS.md, "LCE").
         # Stage 1: 20 epochs over 8000 samples. Stage 2: a warm restart over 48000 samples, the
-        # 8000 and 40000 new ones. Stages 3 to 17: warm restarts over 32000 and then 24000 more
+        # 8000 and 40000 new ones. Stages 3 to 22: warm restarts over 32000 and then 24000 more
         # new ones each. More data, not more epochs, is what helps (docs/RESULTS.md, "LCE").
         gen() { [ -d "runs/data/$1" ] || $T gen-lce --out "runs/data/$1" --scale 2 "${@:2}"; }
         gen lce2-train --count 4000 --seed 1 --variant mixed

@@ -56,17 +56,20 @@ impl AppState {
         }
     }
 
-    /// Installs the loaded models and marks the service ready.
+    /// Installs the loaded models and marks the service ready; logs and exports
+    /// (`multifit_model_info`) each model's name, version, kind and weights digest.
     pub fn set_models(&self, models: BTreeMap<String, LoadedModel>) {
         for m in models.values() {
+            let (card, sha) = (&m.card, m.weights_sha256().unwrap_or_default());
+            tracing::info!(
+                model = %card.name,
+                version = %card.version,
+                weights_sha256 = %sha,
+                "model loaded"
+            );
             self.telemetry
                 .model_info
-                .with_label_values(&[
-                    &m.card.name,
-                    &m.card.version,
-                    m.card.kind.as_str(),
-                    m.weights_sha256().unwrap_or_default(),
-                ])
+                .with_label_values(&[&card.name, &card.version, card.kind.as_str(), sha])
                 .set(1);
         }
         let models = models.into_iter().map(|(k, v)| (k, Arc::new(v))).collect();

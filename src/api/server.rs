@@ -132,19 +132,9 @@ pub async fn serve(
             });
         match loaded {
             Ok(models) => {
-                for m in models.values() {
-                    let sha = m.weights_sha256().unwrap_or_default();
-                    let card = &m.card;
-                    tracing::info!(
-                        model = %card.name,
-                        version = %card.version,
-                        weights_sha256 = %sha,
-                        "model loaded"
-                    );
-                }
-                let names: Vec<&String> = models.keys().collect();
-                tracing::info!(?names, fit_threads, "models loaded; ready");
+                let names: Vec<String> = models.keys().cloned().collect();
                 loader_state.set_models(models);
+                tracing::info!(?names, fit_threads, "models loaded; ready");
             }
             Err(e) => {
                 let _ = failed_tx.send(e);
