@@ -1,0 +1,59 @@
+#!/usr/bin/env python3
+"""How K chosen by SOD compares with the true K, per cross-validation run.
+
+Usage: scripts/sod-misses.py docs/results/<run> [...]
+Each run directory holds either kept-eval.json (ensembles of kept fold models) or folds/*.json;
+each row has k_true and sod.k. Prints, per run, the folds whose K was right, too low and too high,
+then the folds picked too low, with their true and chosen K and the share of the clip's points
+outside its two largest motions (read from $MULTIFIT_DATA/kt3dmoseg_first5, default
+../shared/datasets).
+"""
+import collections
+import glob
+import json
+import os
+import sys
+
+
+def rows(run):
+    kept = os.path.join(run, "kept-eval.json")
+    if os.path.exists(kept):
+        return json.load(open(kept))["rows"]
+    out = []
+    for f in sorted(glob.glob(os.path.join(run, "folds", "*.json")) + glob.glob(os.path.join(run, "*.json"))):
+        j = json.load(open(f))
+        if isinstance(j, dict) and "rows" in j:
+            out += j["rows"]
+    return out
+
+
+def beyond_two(name):
+    """Share of the test clip's points outside its two largest groups, or None without the data."""
+    data = os.environ.get("MULTIFIT_DATA", "../shared/datasets")
+    path = os.path.join(data, "kt3dmoseg_first5", name.split("[")[0] + ".json")
+    if not os.path.exists(path):
+        return None
+    sizes = sorted(collections.Counter(json.load(open(path))["labels"]).values(), reverse=True)
+    return sum(sizes[2:]) / sum(sizes)
+
+
+def main(runs):
+    if not runs:
+        sys.exit(__doc__)
+    for run in runs:
+        rs = rows(run)
+        if not rs:
+            print(f"{os.path.basename(run)}: no per-fold rows")
+            continue
+        right = sum(r["sod"]["k"] == r["k_true"] for r in rs)
+        low = [r for r in rs if r["sod"]["k"] < r["k_true"]]
+        high = sum(r["sod"]["k"] > r["k_true"] for r in rs)
+        print(f"{os.path.basename(run)}: {len(rs)} folds, right {right}, too low {len(low)}, too high {high}")
+        for r in low:
+            share = beyond_two(r["name"])
+            rest = "" if share is None else f", {100 * share:.1f} % of points beyond the two largest motions"
+            print(f"    {r['name']}: true {r['k_true']}, SOD {r['sod']['k']}{rest}")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
