@@ -2,29 +2,22 @@
 """How K chosen by SOD compares with the true K, per cross-validation run.
 
 Usage: scripts/sod-misses.py docs/results/<run> [...]
-Each run directory holds either kept-eval.json (ensembles of kept fold models) or folds/*.json;
-each row has k_true and sod.k. Prints, per run, the folds whose K was right, too low and too high,
+Each run directory holds kept-eval.json (ensembles of kept fold models) or summary.json, whose
+rows have k_true and sod.k. Prints, per run, the folds whose K was right, too low and too high,
 then the folds picked too low, with their true and chosen K and the share of the clip's points
 outside its two largest motions (read from $MULTIFIT_DATA/kt3dmoseg_first5, default
 ../shared/datasets).
 """
 import collections
-import glob
 import json
 import os
 import sys
 
 
 def rows(run):
+    """The per-fold rows of a run: kept-eval.json for ensembles of kept fold models, else summary.json."""
     kept = os.path.join(run, "kept-eval.json")
-    if os.path.exists(kept):
-        return json.load(open(kept))["rows"]
-    out = []
-    for f in sorted(glob.glob(os.path.join(run, "folds", "*.json")) + glob.glob(os.path.join(run, "*.json"))):
-        j = json.load(open(f))
-        if isinstance(j, dict) and "rows" in j:
-            out += j["rows"]
-    return out
+    return json.load(open(kept if os.path.exists(kept) else os.path.join(run, "summary.json")))["rows"]
 
 
 def beyond_two(name):
