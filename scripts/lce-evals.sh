@@ -8,7 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 m=${1:-models/lce}; rec=${2:-}
 T=./target/release/multifit-train
-[ -x $T ] || cargo build --release --bin multifit-train
+cargo build --release --bin multifit-train   # as train-models.sh: never evaluate with a stale binary
 gen() { [ -d "runs/data/$1" ] || $T gen-lce --out "runs/data/$1" "${@:2}"; }
 gen lce2-val --count 100 --seed 3 --scale 2
 gen lce2-val2 --count 400 --seed 81 --scale 2
