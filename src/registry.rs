@@ -366,7 +366,7 @@ impl LoadedModel {
     /// each network of each image (networks vary fastest), side by side, divided by the square
     /// root of m so that it keeps unit length. An image that does not exist (a symmetry that
     /// does not apply to the kind, or coordinates pushed past the accepted range) is left out.
-    fn fit_embeddings(
+    pub fn fit_embeddings(
         &self,
         points: &PointSet,
         image: Option<ImageSize>,
@@ -399,6 +399,21 @@ impl LoadedModel {
         Ok((rows, e * all.len()))
     }
 
+    /// Clusters embeddings from [`LoadedModel::fit_embeddings`] on this model's threads:
+    /// `embeddings` `[n, e]` -> n labels.
+    pub fn cluster(
+        &self,
+        embeddings: &[f32],
+        e: usize,
+        params: &ClusterParams,
+    ) -> Result<Clustering, FitError> {
+        Ok(cluster::cluster_on(
+            Points::new(embeddings, e)?,
+            params,
+            &self.threads,
+        )?)
+    }
+
     /// Normalise, embed (with the card's test symmetries) and cluster one point set.
     pub fn fit(
         &self,
@@ -426,7 +441,7 @@ impl LoadedModel {
         let t0 = Instant::now();
         let (embeddings, e) = self.fit_embeddings(points, image, symmetries)?;
         let t1 = Instant::now();
-        let clustering = cluster::cluster_on(Points::new(&embeddings, e)?, params, &self.threads)?;
+        let clustering = self.cluster(&embeddings, e, params)?;
         let t2 = Instant::now();
         Ok(FitOutcome {
             clustering,
@@ -605,7 +620,7 @@ pub fn load_all(root: &Path) -> Result<BTreeMap<String, LoadedModel>, RegistryEr
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::train::cv::card_for;
     use crate::train::{Schedule, TrainConfig};
@@ -614,7 +629,8 @@ mod tests {
         tiny_seeded(symmetries, 7)
     }
 
-    fn tiny_seeded(symmetries: Vec<Symmetry>, seed: u64) -> LoadedModel {
+    /// A one-block network on 2-frame tracks (D = 4), embedding in 3 dimensions.
+    pub(crate) fn tiny_seeded(symmetries: Vec<Symmetry>, seed: u64) -> LoadedModel {
         let model = ModelConfig {
             input_dim: 4,
             width: 8,

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::cluster::{ClusterParams, Selection};
+use crate::cluster::{ClusterParams, Clustering, Selection};
 use crate::data::Sample;
 use crate::metrics::{error_rate, mean_median, model_selection_rate, nmi};
 use crate::registry::{FitError, LoadedModel};
@@ -25,6 +25,11 @@ pub struct EvalRow {
     pub known: Score,
     pub sod: Score,
     pub silhouette: Score,
+    /// The k-means residual curve r(K), K = 1, 2, ... (one past `k_max`, as SOD reads it), so
+    /// that other rules for choosing K can be studied without embedding again. Empty in results
+    /// written before it was recorded.
+    #[serde(default)]
+    pub residuals: Vec<f64>,
 }
 
 /// Totals over rows for one way of choosing K.
@@ -54,39 +59,53 @@ pub struct EvalSettings {
     pub seed: u64,
 }
 
+/// Scores one clustering of the sample's embeddings, K chosen by `selection`.
 fn score(
     sample: &Sample,
     model: &LoadedModel,
+    embeddings: (&[f32], usize),
     selection: Selection,
     s: &EvalSettings,
-) -> Result<Score, FitError> {
+) -> Result<(Score, Clustering), FitError> {
     let params = ClusterParams::builder()
         .selection(selection)
         .k_max(s.k_max)
         .restarts(s.restarts)
         .seed(s.seed)
         .build()?;
-    let fit = model.fit(&sample.points, sample.image_size, &params)?;
-    Ok(Score {
-        k: fit.clustering.k,
-        error: error_rate(&sample.labels, &fit.clustering.labels),
-        nmi: nmi(&sample.labels, &fit.clustering.labels),
-    })
+    let clustering = model.cluster(embeddings.0, embeddings.1, &params)?;
+    let score = Score {
+        k: clustering.k,
+        error: error_rate(&sample.labels, &clustering.labels),
+        nmi: nmi(&sample.labels, &clustering.labels),
+    };
+    Ok((score, clustering))
 }
 
-/// Evaluates one sample with known K, SOD and silhouette.
+/// Evaluates one sample with known K, SOD and silhouette. The sample is embedded once (with the
+/// card's test symmetries) and the three clusterings share the embeddings; every K has its own
+/// seeded k-means, so each is the clustering a fit with that selection returns.
 pub fn evaluate_sample(
     model: &LoadedModel,
     sample: &Sample,
     s: &EvalSettings,
 ) -> Result<EvalRow, FitError> {
+    let (z, e) = model.fit_embeddings(
+        &sample.points,
+        sample.image_size,
+        &model.card.test_symmetries,
+    )?;
+    let (known, _) = score(sample, model, (&z, e), Selection::Fixed(sample.k), s)?;
+    let (sod, curve) = score(sample, model, (&z, e), Selection::Sod, s)?;
+    let (silhouette, _) = score(sample, model, (&z, e), Selection::Silhouette, s)?;
     Ok(EvalRow {
         name: sample.name.clone(),
         n: sample.points.len(),
         k_true: sample.k,
-        known: score(sample, model, Selection::Fixed(sample.k), s)?,
-        sod: score(sample, model, Selection::Sod, s)?,
-        silhouette: score(sample, model, Selection::Silhouette, s)?,
+        known,
+        sod,
+        silhouette,
+        residuals: curve.residuals.iter().map(|r| r.1).collect(),
     })
 }
 
@@ -175,7 +194,70 @@ mod tests {
             known: s(0),
             sod: s(1),
             silhouette: s(2),
+            residuals: vec![],
         }
+    }
+
+    /// Evaluating embeds once and clusters three times; each score must be what a fit with
+    /// that selection gives, and the curve SOD's.
+    #[test]
+    fn evaluate_sample_matches_three_fits() {
+        use crate::data::{ImageSize, Kind, PointSet, Symmetry};
+        let model =
+            crate::registry::tests::tiny_seeded(vec![Symmetry::Mirror, Symmetry::Reverse], 3);
+        // 24 two-frame tracks in three groups moving differently.
+        let mut values = Vec::new();
+        let mut labels = Vec::new();
+        for i in 0..24 {
+            let (g, x, y) = (i % 3, (i * 7 % 19) as f64, (i * 5 % 17) as f64);
+            let shift = [(0.0, 0.0), (3.0, -1.0), (-2.0, 4.0)][g];
+            values.extend([x, x + shift.0, y, y + shift.1]);
+            labels.push(g);
+        }
+        let sample = Sample {
+            name: "s".into(),
+            points: PointSet::from_flat(Kind::Trajectories, 4, values).unwrap(),
+            labels,
+            k: 3,
+            image_size: Some(ImageSize::new(20.0, 20.0).unwrap()),
+        };
+        let s = EvalSettings {
+            k_max: 5,
+            restarts: 2,
+            seed: 4,
+        };
+        let row = evaluate_sample(&model, &sample, &s).unwrap();
+        let fit = |selection| {
+            let params = ClusterParams::builder()
+                .selection(selection)
+                .k_max(s.k_max)
+                .restarts(s.restarts)
+                .seed(s.seed)
+                .build()
+                .unwrap();
+            model
+                .fit(&sample.points, sample.image_size, &params)
+                .unwrap()
+                .clustering
+        };
+        for (got, selection) in [
+            (row.known, Selection::Fixed(3)),
+            (row.sod, Selection::Sod),
+            (row.silhouette, Selection::Silhouette),
+        ] {
+            let c = fit(selection);
+            assert_eq!(got.k, c.k, "{selection:?}");
+            assert_eq!(
+                got.error,
+                error_rate(&sample.labels, &c.labels),
+                "{selection:?}"
+            );
+            assert_eq!(got.nmi, nmi(&sample.labels, &c.labels), "{selection:?}");
+        }
+        let curve: Vec<f64> = fit(Selection::Sod).residuals.iter().map(|r| r.1).collect();
+        assert_eq!(row.residuals, curve);
+        assert_eq!(row.residuals.len(), s.k_max + 1);
+        assert_eq!(row.known.k, 3);
     }
 
     #[test]
