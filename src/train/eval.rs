@@ -30,6 +30,11 @@ pub struct EvalRow {
     /// written before it was recorded.
     #[serde(default)]
     pub residuals: Vec<f64>,
+    /// The error of the k-means clustering at every K = 1..=`k_max` (the same seeded runs SOD
+    /// and silhouette choose among), so that a rule's choice can be scored too. Empty in results
+    /// written before it was recorded.
+    #[serde(default)]
+    pub errors_by_k: Vec<f64>,
 }
 
 /// Totals over rows for one way of choosing K.
@@ -98,6 +103,13 @@ pub fn evaluate_sample(
     let (known, _) = score(sample, model, (&z, e), Selection::Fixed(sample.k), s)?;
     let (sod, curve) = score(sample, model, (&z, e), Selection::Sod, s)?;
     let (silhouette, _) = score(sample, model, (&z, e), Selection::Silhouette, s)?;
+    let errors_by_k = (1..=s.k_max.min(sample.points.len()))
+        .map(|k| {
+            Ok(score(sample, model, (&z, e), Selection::Fixed(k), s)?
+                .0
+                .error)
+        })
+        .collect::<Result<_, FitError>>()?;
     Ok(EvalRow {
         name: sample.name.clone(),
         n: sample.points.len(),
@@ -106,6 +118,7 @@ pub fn evaluate_sample(
         sod,
         silhouette,
         residuals: curve.residuals.iter().map(|r| r.1).collect(),
+        errors_by_k,
     })
 }
 
@@ -195,6 +208,7 @@ mod tests {
             sod: s(1),
             silhouette: s(2),
             residuals: vec![],
+            errors_by_k: vec![],
         }
     }
 
@@ -258,6 +272,12 @@ mod tests {
         assert_eq!(row.residuals, curve);
         assert_eq!(row.residuals.len(), s.k_max + 1);
         assert_eq!(row.known.k, 3);
+        assert_eq!(row.errors_by_k.len(), s.k_max);
+        assert_eq!(row.errors_by_k[2], row.known.error);
+        assert_eq!(row.errors_by_k[row.sod.k - 1], row.sod.error);
+        assert_eq!(row.errors_by_k[row.silhouette.k - 1], row.silhouette.error);
+        // One cluster puts every point but the largest group's third wrong: 16 of 24.
+        assert!((row.errors_by_k[0] - 16.0 / 24.0).abs() < 1e-12);
     }
 
     #[test]
