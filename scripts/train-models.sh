@@ -115,7 +115,9 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         restart 32 ag 331 runs/lce-stage32/model "${sym[@]}"
         restart 33 ah 341 runs/lce-stage33/model "${sym[@]}"
         restart 34 ai 351 runs/lce-stage34/model "${sym[@]}"
-        restart 35 aj 361 models/lce "${sym[@]}" ;;
+        restart 35 aj 361 runs/lce-stage35/model "${sym[@]}"
+        restart 36 ak 371 runs/lce-stage36/model "${sym[@]}"
+        restart 37 al 381 models/lce "${sym[@]}" ;;
       *) echo "unknown model $m" >&2; exit 2 ;;
     esac
   done
