@@ -94,8 +94,9 @@ fn fits_a_real_kt3dmoseg_sequence() {
     assert_eq!(m.status, 200, "{}", m.text());
     assert_eq!(labels(&m.json()), labels(&known.json()));
 
-    // The shipped kt3dmoseg is an ensemble: each row sets the networks' unit embeddings side by
-    // side, scaled to unit length, with or without the (empty) test symmetries.
+    // The shipped kt3dmoseg is an ensemble: each row sets the unit embeddings of every network of
+    // every image side by side, scaled to unit length. Its test symmetries (mirror, reverse: each
+    // its own inverse, and they commute) give 2^m images with them on, the input alone with them off.
     let card: Value = serde_json::from_slice(
         &std::fs::read(common::repo().join("models/kt3dmoseg/model.json")).unwrap(),
     )
@@ -103,7 +104,9 @@ fn fits_a_real_kt3dmoseg_sequence() {
     let networks = 1 + card["members"].as_array().map_or(0, Vec::len);
     assert!(networks > 1, "kt3dmoseg ships as an ensemble");
     let e = card["architecture"]["embed_dim"].as_u64().unwrap() as usize;
+    let symmetries = card["test_symmetries"].as_array().map_or(0, Vec::len);
     for flag in [true, false] {
+        let images = if flag { 1 << symmetries } else { 1 };
         let r = server.post_json(
             "/v1/fit",
             &fit_body(
@@ -115,7 +118,7 @@ fn fits_a_real_kt3dmoseg_sequence() {
         let rows = embeddings(&r.json());
         assert_eq!(rows.len(), n);
         for row in rows {
-            assert_eq!(row.len(), e * networks);
+            assert_eq!(row.len(), e * networks * images);
             let norm: f64 = row.iter().map(|x| x * x).sum();
             assert!((norm - 1.0).abs() < 1e-3, "unit rows: {norm}");
             // Every network's block has length 1/sqrt(networks).
