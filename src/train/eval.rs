@@ -88,8 +88,9 @@ fn score(
 }
 
 /// Evaluates one sample with known K, SOD and silhouette. The sample is embedded once (with the
-/// card's test symmetries) and the three clusterings share the embeddings; every K has its own
-/// seeded k-means, so each is the clustering a fit with that selection returns.
+/// card's test symmetries) and every clustering (each K up to `k_max`, SOD's, silhouette's)
+/// shares the embeddings; every K has its own seeded k-means, so each is the clustering a fit
+/// with that selection returns.
 pub fn evaluate_sample(
     model: &LoadedModel,
     sample: &Sample,
@@ -100,16 +101,16 @@ pub fn evaluate_sample(
         sample.image_size,
         &model.card.test_symmetries,
     )?;
-    let (known, _) = score(sample, model, (&z, e), Selection::Fixed(sample.k), s)?;
+    let by_k = (1..=s.k_max.min(sample.points.len()))
+        .map(|k| Ok(score(sample, model, (&z, e), Selection::Fixed(k), s)?.0))
+        .collect::<Result<Vec<Score>, FitError>>()?;
+    let known = match by_k.get(sample.k.wrapping_sub(1)) {
+        Some(&known) => known,
+        None => score(sample, model, (&z, e), Selection::Fixed(sample.k), s)?.0,
+    };
     let (sod, curve) = score(sample, model, (&z, e), Selection::Sod, s)?;
     let (silhouette, _) = score(sample, model, (&z, e), Selection::Silhouette, s)?;
-    let errors_by_k = (1..=s.k_max.min(sample.points.len()))
-        .map(|k| {
-            Ok(score(sample, model, (&z, e), Selection::Fixed(k), s)?
-                .0
-                .error)
-        })
-        .collect::<Result<_, FitError>>()?;
+    let errors_by_k = by_k.iter().map(|score| score.error).collect();
     Ok(EvalRow {
         name: sample.name.clone(),
         n: sample.points.len(),
