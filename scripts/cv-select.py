@@ -13,6 +13,8 @@ import json
 import statistics as st
 import sys
 
+from loo import choose_without
+
 
 def load(path):
     rows = json.load(open(path))["rows"]
@@ -46,12 +48,9 @@ def main():
         k = sum(right(n, f) for f in folds) / len(folds)
         print(f"{n:24s} mean {100 * st.mean(e):6.2f}  median {100 * st.median(e):6.2f}  "
               f"K right {100 * k:5.1f} %")
-    chosen, picks = [], {}
-    for f in folds:
-        others = [g for g in folds if g != f]
-        best = min(names, key=lambda n: (st.mean(err[n][g] for g in others), names.index(n)))
-        picks[best] = picks.get(best, 0) + 1
-        chosen.append((f, best))
+    picked = choose_without({n: [err[n][f] for f in folds] for n in names}, names)
+    chosen = list(zip(folds, picked))
+    picks = {n: picked.count(n) for n in dict.fromkeys(picked)}
     e = [err[n][f] for f, n in chosen]
     k = sum(right(n, f) for f, n in chosen) / len(folds)
     print(f"{'chosen without the fold':24s} mean {100 * st.mean(e):6.2f}  median "

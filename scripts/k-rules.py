@@ -20,6 +20,8 @@ import math
 import statistics as st
 import sys
 
+from loo import choose_without
+
 
 def rows_of(path):
     d = json.load(open(path))
@@ -85,13 +87,8 @@ def main():
     for n in names:
         print(f"  {n:12s} mean {100 * st.mean(err[n]):6.2f}  median {100 * st.median(err[n]):6.2f}"
               f"  K right {100 * st.mean(right[n]):5.1f} %")
-    chosen, counts = [], {}
-    for i in range(len(rows)):
-        def loss(n):
-            return (st.mean(e for j, e in enumerate(err[n]) if j != i), names.index(n))
-        best = min(names, key=loss)
-        counts[best] = counts.get(best, 0) + 1
-        chosen.append(best)
+    chosen = choose_without(err, names)
+    counts = {n: chosen.count(n) for n in dict.fromkeys(chosen)}
     e = [err[n][i] for i, n in enumerate(chosen)]
     ok = [right[n][i] for i, n in enumerate(chosen)]
     print(f"  rule chosen without the sample: mean {100 * st.mean(e):.2f}  median "

@@ -104,7 +104,7 @@ pub fn evaluate_sample(
     let by_k = (1..=s.k_max.min(sample.points.len()))
         .map(|k| Ok(score(sample, model, (&z, e), Selection::Fixed(k), s)?.0))
         .collect::<Result<Vec<Score>, FitError>>()?;
-    let known = match by_k.get(sample.k.wrapping_sub(1)) {
+    let known = match sample.k.checked_sub(1).and_then(|i| by_k.get(i)) {
         Some(&known) => known,
         None => score(sample, model, (&z, e), Selection::Fixed(sample.k), s)?.0,
     };
