@@ -427,18 +427,24 @@ fn overload_answers_429_and_timeouts_503() {
         serde_json::to_vec(&json!({"kind": "points2d", "points": rows, "selection": "silhouette"}))
             .unwrap();
     let addr = server.addr;
-    let handles: Vec<_> = (0..6)
-        .map(|_| {
-            let body = body.clone();
-            std::thread::spawn(move || {
-                common::send(addr, "POST", "/v1/fit", Some("application/json"), body).unwrap()
-            })
+    let post = |body: Vec<u8>| {
+        std::thread::spawn(move || {
+            common::send(addr, "POST", "/v1/fit", Some("application/json"), body).unwrap()
         })
-        .collect();
+    };
+    // One fit takes the only place; the five sent once it is admitted find the house full.
+    let mut handles = vec![post(body.clone())];
+    common::wait_queue_depth(addr, 1, std::time::Duration::from_secs(20));
+    handles.extend((0..5).map(|_| post(body.clone())));
     let answers: Vec<_> = handles.into_iter().map(|h| h.join().unwrap()).collect();
+    assert_eq!(
+        answers[0].status,
+        200,
+        "the admitted fit runs: {}",
+        answers[0].text()
+    );
     let ok = answers.iter().filter(|r| r.status == 200).count();
     let busy: Vec<_> = answers.iter().filter(|r| r.status == 429).collect();
-    assert!(ok >= 1, "at least one fit runs");
     assert!(!busy.is_empty(), "a full queue answers 429");
     assert_eq!(ok + busy.len(), 6, "nothing else than 200 or 429");
     for r in busy {
@@ -570,7 +576,9 @@ fn sigterm_drains_in_flight_requests_and_exits_zero() {
     let in_flight = std::thread::spawn(move || {
         common::send(addr, "POST", "/v1/fit", Some("application/json"), body)
     });
-    std::thread::sleep(std::time::Duration::from_millis(100));
+    // Signal only once the fit is admitted (a fixed pause can end before a loaded machine has
+    // even sent the request, which the server then rightly refuses).
+    common::wait_queue_depth(addr, 1, std::time::Duration::from_secs(20));
     let (code, stderr) = server.terminate();
     let answer = in_flight
         .join()

@@ -17,7 +17,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use common::{Server, labels, send};
+use common::{Server, labels, send, wait_queue_depth};
 use multifit::data::synthetic::{LceConfig, LceGenerator, LceVariant};
 use serde_json::{Value, json};
 
@@ -60,15 +60,6 @@ fn wait_exit(server: &mut Server, limit: Duration) -> Option<ExitStatus> {
         std::thread::sleep(Duration::from_millis(10));
     }
     None
-}
-
-/// The `multifit_queue_depth` gauge (fits admitted: running or waiting for a worker).
-fn queue_depth(addr: SocketAddr) -> Option<i64> {
-    let r = send(addr, "GET", "/metrics", None, Vec::new()).ok()?;
-    r.text()
-        .lines()
-        .find_map(|l| l.strip_prefix("multifit_queue_depth "))
-        .and_then(|v| v.trim().parse().ok())
 }
 
 /// An HTTP/1.1 keep-alive connection that has completed one request and stays open, idle.
@@ -151,18 +142,7 @@ fn sigterm_under_load_completes_in_flight_refuses_new_and_exits_zero() {
     };
     // Every request is in flight once all of them are admitted (the batch admits one entry at
     // a time): the fits and the batch's first entry.
-    let deadline = Instant::now() + Duration::from_secs(20);
-    loop {
-        let depth = queue_depth(addr).unwrap_or(0);
-        if depth == FITS as i64 + 1 {
-            break;
-        }
-        assert!(
-            Instant::now() < deadline,
-            "requests were not admitted (queue depth {depth})"
-        );
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    wait_queue_depth(addr, FITS as i64 + 1, Duration::from_secs(20));
     assert_eq!(
         done.load(Ordering::SeqCst),
         0,

@@ -199,6 +199,34 @@ pub fn send(
     })
 }
 
+/// The `multifit_queue_depth` gauge: fit requests admitted and not yet answered (body being
+/// read, waiting for a worker or running); `None` when `/metrics` cannot be read.
+pub fn queue_depth(addr: SocketAddr) -> Option<i64> {
+    let r = send(addr, "GET", "/metrics", None, Vec::new()).ok()?;
+    r.text()
+        .lines()
+        .find_map(|l| l.strip_prefix("multifit_queue_depth "))
+        .and_then(|v| v.trim().parse().ok())
+}
+
+/// Waits until the server has admitted exactly `n` fit requests, at most `limit`: a test that
+/// needs requests in flight waits for them instead of sleeping for a guessed time, which a
+/// loaded machine can overrun.
+pub fn wait_queue_depth(addr: SocketAddr, n: i64, limit: Duration) {
+    let deadline = Instant::now() + limit;
+    loop {
+        let depth = queue_depth(addr);
+        if depth == Some(n) {
+            return;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "{n} fit requests not admitted within {limit:?} (queue depth {depth:?})"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
 /// A dataset sequence file as JSON.
 pub fn dataset(rel: &str) -> Value {
     let path = datasets().join(rel);
