@@ -77,7 +77,9 @@ fn main() {
             // `threads` equal parts, one single-threaded sgemm call per part and layer.
             let (wd, ww, we) = (pseudo(d * w, 1), pseudo(w * w, 2), pseudo(w * e, 3));
             let rows = n.div_ceil(threads);
-            let mut parts: Vec<(&[f32], Vec<f32>, Vec<f32>, Vec<f32>)> = x
+            // One part: its input rows, two hidden-layer buffers (ping-pong), its embeddings.
+            type Part<'a> = (&'a [f32], Vec<f32>, Vec<f32>, Vec<f32>);
+            let mut parts: Vec<Part> = x
                 .chunks(rows * d)
                 .map(|p| {
                     let r = p.len() / d;

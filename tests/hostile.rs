@@ -1268,9 +1268,9 @@ fn check_fit_value(case: &str, v: &Value, n: usize) -> Vec<usize> {
         .collect();
     assert_eq!(sizes.len(), k, "{case}: one size per cluster");
     assert_eq!(sizes.iter().sum::<usize>(), n, "{case}: sizes sum to N");
-    for c in 0..k {
+    for (c, &size) in sizes.iter().enumerate() {
         assert_eq!(
-            sizes[c],
+            size,
             l.iter().filter(|&&x| x == c).count(),
             "{case}: cluster_sizes match the labels"
         );

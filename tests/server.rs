@@ -234,7 +234,9 @@ fn fits_a_generated_lce_sample_invariant_to_scale() {
 fn every_error_answers_with_the_json_shape() {
     let server = Server::start(&["--body-limit", "200000", "--max-points", "3000"]);
     let two = json!([[0.0, 0.0], [1.0, 1.0]]);
-    let cases: Vec<(&str, Option<&str>, Vec<u8>, u16, &str)> = vec![
+    /// (case, content type, body, expected status, expected error code)
+    type Case<'a> = (&'a str, Option<&'a str>, Vec<u8>, u16, &'a str);
+    let cases: Vec<Case> = vec![
         (
             "truncated",
             Some("application/json"),
