@@ -624,6 +624,7 @@ pub(crate) mod tests {
     use super::*;
     use crate::train::cv::card_for;
     use crate::train::{Schedule, TrainConfig};
+    use tempfile::TempDir;
 
     fn tiny(symmetries: Vec<Symmetry>) -> LoadedModel {
         tiny_seeded(symmetries, 7)
@@ -759,25 +760,12 @@ pub(crate) mod tests {
         card.validate().unwrap();
     }
 
-    /// A directory removed when dropped.
-    struct TempDir(PathBuf);
-
-    impl TempDir {
-        fn new(tag: &str) -> Self {
-            let dir = std::env::temp_dir().join(format!("multifit-{tag}-{}", std::process::id()));
-            let _ = std::fs::remove_dir_all(&dir);
-            Self(dir)
-        }
-
-        fn path(&self) -> &Path {
-            &self.0
-        }
-    }
-
-    impl Drop for TempDir {
-        fn drop(&mut self) {
-            let _ = std::fs::remove_dir_all(&self.0);
-        }
+    /// A fresh directory (`multifit-<tag>-XXXXXX` in the system temp dir), removed when dropped.
+    fn scratch(tag: &str) -> TempDir {
+        tempfile::Builder::new()
+            .prefix(&format!("multifit-{tag}-"))
+            .tempdir()
+            .unwrap()
     }
 
     fn save(model: &LoadedModel, dir: &Path) {
@@ -796,7 +784,7 @@ pub(crate) mod tests {
 
     #[test]
     fn an_ensemble_sets_every_network_of_every_image_side_by_side() {
-        let tmp = TempDir::new("ensemble");
+        let tmp = scratch("ensemble");
         let (a, b, dirs) = two_saved_models(&tmp);
         let out = tmp.path().join("both");
         let card = write_ensemble(&dirs, &out, "both").unwrap();
@@ -840,7 +828,7 @@ pub(crate) mod tests {
 
     #[test]
     fn ensembles_refuse_mismatched_or_single_models() {
-        let tmp = TempDir::new("ensemble-refusals");
+        let tmp = scratch("ensemble-refusals");
         let a = tiny(vec![]);
         let mut wider = tiny(vec![]);
         wider.card.architecture.width = 16;
@@ -882,7 +870,7 @@ pub(crate) mod tests {
 
     #[test]
     fn ensembles_replace_a_model_whole_and_refuse_other_outputs() {
-        let tmp = TempDir::new("ensemble-out");
+        let tmp = scratch("ensemble-out");
         let (_, _, dirs) = two_saved_models(&tmp);
         let out = tmp.path().join("e");
         let refuse = |dirs: &[PathBuf], out: &Path| write_ensemble(dirs, out, "e").unwrap_err();
@@ -930,7 +918,7 @@ pub(crate) mod tests {
     #[test]
     fn ensemble_weights_do_not_keep_private_source_permissions() {
         use std::os::unix::fs::PermissionsExt;
-        let tmp = TempDir::new("ensemble-mode");
+        let tmp = scratch("ensemble-mode");
         let dirs = [tmp.path().join("a"), tmp.path().join("b")];
         save(&tiny_seeded(vec![], 7), &dirs[0]);
         save(&tiny_seeded(vec![], 8), &dirs[1]);
@@ -955,7 +943,7 @@ pub(crate) mod tests {
 
     #[test]
     fn the_weights_digest_is_the_sha256_of_the_weight_files_in_card_order() {
-        let tmp = TempDir::new("digest");
+        let tmp = scratch("digest");
         let mut card = tiny_seeded(vec![], 7).card;
         std::fs::create_dir_all(tmp.path()).unwrap();
         std::fs::write(tmp.path().join(WEIGHTS_FILE), b"abc").unwrap();
@@ -984,7 +972,7 @@ pub(crate) mod tests {
 
     #[test]
     fn a_loaded_model_reports_its_weights_digest_and_a_model_built_in_process_none() {
-        let tmp = TempDir::new("loaded-digest");
+        let tmp = scratch("loaded-digest");
         let (a, _, dirs) = two_saved_models(&tmp);
         assert_eq!(a.weights_sha256(), None);
         let loaded = LoadedModel::load(&dirs[0]).unwrap();

@@ -5,6 +5,8 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use common::Scratch;
+
 fn copy_model(name: &str, to: &Path) -> PathBuf {
     let dst = to.join(name);
     std::fs::create_dir_all(&dst).unwrap();
@@ -18,11 +20,8 @@ fn copy_model(name: &str, to: &Path) -> PathBuf {
     dst
 }
 
-fn temp(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("multifit-faults-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn temp(tag: &str) -> Scratch {
+    Scratch::new(&format!("faults-{tag}"))
 }
 
 /// Runs the server on `models` and expects a non-zero exit whose log names `needle`.

@@ -3,9 +3,10 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
+use common::Scratch;
 use serde_json::Value;
 
 const TINY: [&str; 10] = [
@@ -21,11 +22,8 @@ const TINY: [&str; 10] = [
     "1e-3",
 ];
 
-fn temp(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("multifit-trainer-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+fn temp(tag: &str) -> Scratch {
+    Scratch::new(&format!("trainer-{tag}"))
 }
 
 fn run(args: &[&str]) -> Output {
@@ -47,7 +45,7 @@ fn ok(args: &[&str]) -> String {
 }
 
 /// Copies some dataset files into a fresh directory.
-fn subset(tag: &str, dir: &str, names: &[&str]) -> PathBuf {
+fn subset(tag: &str, dir: &str, names: &[&str]) -> Scratch {
     let to = temp(tag);
     for n in names {
         std::fs::copy(

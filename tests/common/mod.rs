@@ -21,6 +21,34 @@ pub fn datasets() -> PathBuf {
     repo().join("..").join("shared").join("datasets")
 }
 
+/// A fresh scratch directory under the system temp dir (`multifit-<tag>-XXXXXX`), removed with
+/// everything in it when dropped; it dereferences to its path.
+pub struct Scratch(tempfile::TempDir);
+
+impl Scratch {
+    pub fn new(tag: &str) -> Scratch {
+        Scratch(
+            tempfile::Builder::new()
+                .prefix(&format!("multifit-{tag}-"))
+                .tempdir()
+                .expect("create a scratch directory"),
+        )
+    }
+}
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
 /// A running `multifit-server` process, killed on drop.
 pub struct Server {
     pub addr: SocketAddr,
