@@ -431,6 +431,52 @@ fn train_on_lce_batches_with_validation() {
             .iter()
             .any(|m| m["name"] == "validation_error_known_k")
     );
+
+    // The same samples generated in memory train the same network, weight for weight.
+    let out2 = temp("lce-model-mem");
+    let run_dir2 = temp("lce-run-mem");
+    let mut args = vec![
+        "train",
+        "--name",
+        "tiny-lce",
+        "--data",
+        "lce:mixed,count=8,seed=1,points=12",
+        "--val",
+        "lce:mixed,count=2,seed=2,points=12",
+        "--batch-size",
+        "4",
+        "--neighbors",
+        "3",
+        "--out",
+        s(&out2),
+        "--run-dir",
+        s(&run_dir2),
+    ];
+    args.extend(TINY);
+    ok(&args);
+    let weights = |dir: &Path| std::fs::read(dir.join("weights.safetensors")).unwrap();
+    assert!(
+        weights(&out) == weights(&out2),
+        "in-memory LCE data trained other weights"
+    );
+    let card2: Value =
+        serde_json::from_slice(&std::fs::read(out2.join("model.json")).unwrap()).unwrap();
+    assert!(
+        card2["training"]["data"]
+            .as_str()
+            .unwrap()
+            .contains("lce:mixed,count=8,seed=1,scale=1,noise=0.05,points=12"),
+        "{}",
+        card2["training"]["data"]
+    );
+
+    // A spec it cannot generate stops at the flag, naming what is wrong.
+    let bad = run(&["train", "--name", "x", "--data", "lce:triangles,count=8"]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && err.contains("unknown LCE variant") && !err.contains("panicked"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -8,8 +8,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use multifit::data::synthetic::{LceConfig, LceGenerator, LceVariant};
-use multifit::data::{Kind, Normalization, Sample, Sequence, Symmetry, load_sequences};
+use multifit::data::synthetic::{LceConfig, LceSpec, LceVariant};
+use multifit::data::{DataSource, Kind, Normalization, Sample, Sequence, Symmetry};
 use multifit::loss::Loss;
 use multifit::model::ModelConfig;
 use multifit::registry::{
@@ -88,9 +88,12 @@ enum VariantArg {
 /// Data selection shared by train, eval and cv.
 #[derive(Args, Debug, Clone)]
 struct DataArgs {
-    /// Dataset directory or file (repeatable).
+    /// Dataset directory or file, or LCE samples generated in memory:
+    /// lce:<mixed|unmixed>[,count=N][,seed=S][,scale=X][,noise=X][,points=N] (what gen-lce would
+    /// write with the same settings; defaults 200 samples, seed 0, scale 1, noise 0.05, 50 points
+    /// per shape). Repeatable.
     #[arg(long, required = true)]
-    data: Vec<PathBuf>,
+    data: Vec<DataSource>,
     /// Keep only AdelaideRMF sequences of this model type (homography or fundamental).
     #[arg(long)]
     model_type: Option<String>,
@@ -174,9 +177,9 @@ struct TrainCmd {
     data: DataArgs,
     #[command(flatten)]
     train: TrainArgs,
-    /// Validation dataset (directory or file); the best epoch on it is kept.
+    /// Validation dataset (directory, file or lce:... as for --data); the best epoch on it is kept.
     #[arg(long)]
-    val: Option<PathBuf>,
+    val: Option<DataSource>,
     /// Model name (the card's name).
     #[arg(long)]
     name: String,
@@ -291,8 +294,8 @@ impl TrainArgs {
 impl DataArgs {
     fn sequences(&self) -> Result<Vec<Sequence>> {
         let mut all = Vec::new();
-        for path in &self.data {
-            all.extend(load_sequences(path, self.model_type.as_deref())?);
+        for source in &self.data {
+            all.extend(source.sequences(self.model_type.as_deref())?);
         }
         let kind = all[0].points.kind();
         if let Some(s) = all.iter().find(|s| s.points.kind() != kind) {
@@ -347,31 +350,33 @@ fn progress(len: u64) -> ProgressBar {
 }
 
 fn gen_lce(a: GenLceArgs) -> Result<()> {
-    let config = LceConfig {
-        points_per_shape: a.points_per_shape,
-        noise: a.noise,
-        scale: a.scale,
+    let spec = LceSpec {
+        variant: match a.variant {
+            VariantArg::Mixed => LceVariant::Mixed,
+            VariantArg::Unmixed => LceVariant::Unmixed,
+        },
+        count: a.count,
+        seed: a.seed,
+        config: LceConfig {
+            points_per_shape: a.points_per_shape,
+            noise: a.noise,
+            scale: a.scale,
+        },
     };
-    config.validate().map_err(anyhow::Error::msg)?;
-    let variant = match a.variant {
-        VariantArg::Mixed => LceVariant::Mixed,
-        VariantArg::Unmixed => LceVariant::Unmixed,
-    };
+    spec.validate().map_err(anyhow::Error::msg)?;
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("{}: cannot create", a.out.display()))?;
-    let mut generator = LceGenerator::new(a.seed, config);
-    let tag = match variant {
-        LceVariant::Mixed => "mixed",
-        LceVariant::Unmixed => "unmixed",
-    };
-    for i in 0..a.count {
-        let name = format!("lce-{tag}-s{}-{i:05}", a.seed);
-        let sample = generator.sample(variant, &name);
-        let path = a.out.join(format!("{name}.json"));
-        let text = serde_json::to_string(&sample.to_file(variant, a.seed, &config))?;
+    for file in spec.files() {
+        let path = a.out.join(format!("{}.json", file.name));
+        let text = serde_json::to_string(&file)?;
         std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))?;
     }
-    println!("wrote {} {tag} samples to {}", a.count, a.out.display());
+    println!(
+        "wrote {} {} samples to {}",
+        a.count,
+        spec.variant.tag(),
+        a.out.display()
+    );
     Ok(())
 }
 
@@ -387,7 +392,7 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
     let train_samples: Vec<Sample> = seqs.iter().flat_map(|s| plan.train_samples(s)).collect();
     let val_samples = match &a.val {
         Some(p) => {
-            let vs = load_sequences(p, a.data.model_type.as_deref())?;
+            let vs = p.sequences(a.data.model_type.as_deref())?;
             vs.iter().filter_map(|s| plan.test_sample(s)).collect()
         }
         None => vec![],
@@ -469,7 +474,7 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
             a.data
                 .data
                 .iter()
-                .map(|p| p.display().to_string())
+                .map(|p| p.to_string())
                 .collect::<Vec<_>>()
                 .join(", "),
             seqs.len(),
@@ -602,7 +607,7 @@ fn eval_cmd(a: EvalCmd) -> Result<()> {
             a.data
                 .data
                 .iter()
-                .map(|p| p.display().to_string())
+                .map(|p| p.to_string())
                 .collect::<Vec<_>>()
                 .join(", ")
         );

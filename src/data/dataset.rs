@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::points::{ImageSize, InputError, Kind, PointSet};
+use super::synthetic::LceSpec;
 
 /// Why a dataset file or directory could not be used. Every variant names the file.
 #[derive(Debug, thiserror::Error)]
@@ -210,6 +211,56 @@ pub fn renumber(raw: &[i64]) -> (Vec<usize>, usize) {
         .map(|l| distinct.binary_search(l).unwrap_or(0))
         .collect();
     (labels, distinct.len())
+}
+
+/// Where labelled sequences come from: a dataset file or directory, or LCE samples generated in
+/// memory (`lce:...`, see [`LceSpec`]). Parsed from a command-line value: anything that does not
+/// start with `lce:` is a path.
+#[derive(Debug, Clone, PartialEq)]
+pub enum DataSource {
+    Path(PathBuf),
+    Lce(LceSpec),
+}
+
+impl std::str::FromStr for DataSource {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        match text.strip_prefix("lce:") {
+            Some(spec) => spec.parse().map(DataSource::Lce),
+            None if text.is_empty() => Err("empty dataset path".into()),
+            None => Ok(DataSource::Path(PathBuf::from(text))),
+        }
+    }
+}
+
+impl std::fmt::Display for DataSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            DataSource::Path(p) => write!(f, "{}", p.display()),
+            DataSource::Lce(spec) => write!(f, "{spec}"),
+        }
+    }
+}
+
+impl DataSource {
+    /// Its sequences, keeping only AdelaideRMF pairs of `model_type` when given; as
+    /// [`load_sequences`] for a path.
+    pub fn sequences(&self, model_type: Option<&str>) -> Result<Vec<Sequence>, DataError> {
+        match self {
+            DataSource::Path(path) => load_sequences(path, model_type),
+            DataSource::Lce(spec) => {
+                let all = spec.sequences()?;
+                match model_type {
+                    None => Ok(all),
+                    Some(t) => Err(DataError::Invalid {
+                        path: PathBuf::from(self.to_string()),
+                        reason: format!("generated LCE samples have no model type {t:?}"),
+                    }),
+                }
+            }
+        }
+    }
 }
 
 /// Loads every `*.json` file of a directory (sorted by file name), or a single file.

@@ -6,6 +6,6 @@ pub mod points;
 pub mod symmetry;
 pub mod synthetic;
 
-pub use dataset::{DataError, Sample, Sequence, SequenceFile, load_sequences};
+pub use dataset::{DataError, DataSource, Sample, Sequence, SequenceFile, load_sequences};
 pub use points::{ImageSize, InputError, Kind, MIN_POINTS, Normalization, PointSet};
 pub use symmetry::{Symmetry, with_symmetries};

@@ -20,7 +20,7 @@ use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use super::dataset::{Sample, SequenceFile};
+use super::dataset::{DataError, Sample, Sequence, SequenceFile};
 use super::points::{Kind, PointSet};
 
 /// A curve type of the LCE data.
@@ -223,6 +223,120 @@ impl LceSample {
     }
 }
 
+/// A generated LCE dataset, the in-memory twin of a `gen-lce` directory: `count` samples of
+/// `variant` from `seed` with `config`. Written `lce:<variant>[,count=N][,seed=S][,scale=X]
+/// [,noise=X][,points=N]` wherever a dataset path is accepted (defaults: 200 samples, seed 0, and
+/// [`LceConfig::default`]), so training reads the samples without writing them to disk.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LceSpec {
+    pub variant: LceVariant,
+    pub count: usize,
+    pub seed: u64,
+    pub config: LceConfig,
+}
+
+impl LceSpec {
+    /// Checks what a generator needs: a valid config and at least one sample.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.count == 0 {
+            return Err("count must be at least 1".into());
+        }
+        self.config.validate()
+    }
+
+    /// The samples in the on-disk format, in generation order, each with its file name: what
+    /// `gen-lce` writes (names `lce-<variant>-s<seed>-<i:05>`, so a directory listing sorts
+    /// them back into this order for fewer than 100000 samples).
+    pub fn files(&self) -> impl Iterator<Item = SequenceFile> + '_ {
+        let mut generator = LceGenerator::new(self.seed, self.config);
+        let tag = self.variant.tag();
+        (0..self.count).map(move |i| {
+            let name = format!("lce-{tag}-s{}-{i:05}", self.seed);
+            generator
+                .sample(self.variant, &name)
+                .to_file(self.variant, self.seed, &self.config)
+        })
+    }
+
+    /// The samples as validated sequences: exactly what loading the `gen-lce` directory of the
+    /// same settings gives (checked by a test), without the disk. Fails only where a file would
+    /// not load either (a scale so large that points overflow).
+    pub fn sequences(&self) -> Result<Vec<Sequence>, DataError> {
+        self.files()
+            .map(|file| {
+                let name = std::path::PathBuf::from(&file.name);
+                Sequence::from_file(file, &name)
+            })
+            .collect()
+    }
+}
+
+impl LceVariant {
+    /// Its name on the command line and in sample names.
+    pub fn tag(self) -> &'static str {
+        match self {
+            LceVariant::Mixed => "mixed",
+            LceVariant::Unmixed => "unmixed",
+        }
+    }
+}
+
+impl std::fmt::Display for LceSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let c = &self.config;
+        write!(
+            f,
+            "lce:{},count={},seed={},scale={},noise={},points={}",
+            self.variant.tag(),
+            self.count,
+            self.seed,
+            c.scale,
+            c.noise,
+            c.points_per_shape
+        )
+    }
+}
+
+impl std::str::FromStr for LceSpec {
+    type Err = String;
+
+    /// Parses the part after `lce:`, e.g. `mixed,count=12000,seed=301,scale=2`.
+    fn from_str(text: &str) -> Result<Self, String> {
+        let mut parts = text.split(',');
+        let variant = match parts.next().unwrap_or_default() {
+            "mixed" => LceVariant::Mixed,
+            "unmixed" => LceVariant::Unmixed,
+            other => return Err(format!("unknown LCE variant {other:?} (mixed, unmixed)")),
+        };
+        let mut spec = LceSpec {
+            variant,
+            count: 200,
+            seed: 0,
+            config: LceConfig::default(),
+        };
+        for part in parts {
+            let (key, value) = part
+                .split_once('=')
+                .ok_or_else(|| format!("{part:?} is not key=value"))?;
+            let bad = |e: &dyn std::fmt::Display| format!("{key}={value:?}: {e}");
+            match key {
+                "count" => spec.count = value.parse().map_err(|e| bad(&e))?,
+                "seed" => spec.seed = value.parse().map_err(|e| bad(&e))?,
+                "scale" => spec.config.scale = value.parse().map_err(|e| bad(&e))?,
+                "noise" => spec.config.noise = value.parse().map_err(|e| bad(&e))?,
+                "points" => spec.config.points_per_shape = value.parse().map_err(|e| bad(&e))?,
+                _ => {
+                    return Err(format!(
+                        "unknown LCE setting {key:?} (count, seed, scale, noise, points)"
+                    ));
+                }
+            }
+        }
+        spec.validate()?;
+        Ok(spec)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -246,6 +360,69 @@ mod tests {
             assert!((2..=4).contains(&s.shapes.len()));
             assert!(s.shapes.iter().all(|&t| t == s.shapes[0]));
         }
+    }
+
+    #[test]
+    fn spec_parses_prints_and_rejects_what_it_cannot_generate() {
+        let spec: LceSpec = "unmixed,count=12000,seed=302,scale=2".parse().unwrap();
+        assert_eq!(spec.variant, LceVariant::Unmixed);
+        assert_eq!(
+            (spec.count, spec.seed, spec.config.scale),
+            (12000, 302, 2.0)
+        );
+        assert_eq!(spec.config.points_per_shape, 50);
+        let text = spec.to_string();
+        assert_eq!(
+            text,
+            "lce:unmixed,count=12000,seed=302,scale=2,noise=0.05,points=50"
+        );
+        assert_eq!(text["lce:".len()..].parse::<LceSpec>().unwrap(), spec);
+        let defaults: LceSpec = "mixed".parse().unwrap();
+        assert_eq!((defaults.count, defaults.seed), (200, 0));
+        for (bad, says) in [
+            ("triangles", "unknown LCE variant"),
+            ("mixed,count=0", "count must be at least 1"),
+            ("mixed,count=-3", "count=\"-3\""),
+            ("mixed,scale=0", "scale must be finite and positive"),
+            ("mixed,noise=nan", "noise finite"),
+            ("mixed,points=1", "points per shape"),
+            ("mixed,colour=red", "unknown LCE setting"),
+            ("mixed,seed", "not key=value"),
+        ] {
+            let err = bad.parse::<LceSpec>().unwrap_err();
+            assert!(err.contains(says), "{bad}: {err}");
+        }
+    }
+
+    #[test]
+    fn spec_gives_what_its_files_give_after_a_trip_through_disk() {
+        let spec: LceSpec = "mixed,count=12,seed=9,scale=2".parse().unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        // Written as gen-lce writes them, in reverse so the listing, not the writing, orders them.
+        let files: Vec<SequenceFile> = spec.files().collect();
+        for file in files.iter().rev() {
+            let text = serde_json::to_string(file).unwrap();
+            std::fs::write(dir.path().join(format!("{}.json", file.name)), text).unwrap();
+        }
+        let loaded = crate::data::load_sequences(dir.path(), None).unwrap();
+        let generated = spec.sequences().unwrap();
+        assert_eq!(loaded.len(), 12);
+        for (a, b) in loaded.iter().zip(&generated) {
+            assert_eq!(a.name, b.name);
+            assert_eq!(a.labels, b.labels);
+            let bits = |s: &Sequence| {
+                s.points
+                    .values()
+                    .iter()
+                    .map(|v| v.to_bits())
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(bits(a), bits(b), "{}", a.name);
+        }
+        assert_eq!(generated[3].name, "lce-mixed-s9-00003");
+        // A different seed is different data.
+        let other: LceSpec = "mixed,count=12,seed=10,scale=2".parse().unwrap();
+        assert_ne!(other.sequences().unwrap()[0].points, generated[0].points);
     }
 
     #[test]
