@@ -3,7 +3,11 @@
 //! - [`kmeans`]: Lloyd iterations (with Hamerly's distance bounds, which skip work without
 //!   changing the result) from k-means++ seeds, several restarts, the lowest residual kept.
 //!   Deterministic for a fixed seed: every K draws from its own stream derived from the seed, so
-//!   a K's clustering does not depend on which other K were tried.
+//!   a K's clustering does not depend on which other K were tried, unless the curve below needs
+//!   it.
+//! - The curve `r(K)` for K = 1, 2, ... is made to fall as the optimum does: where K's restarts
+//!   end above K - 1's clustering, K is clustered again from K - 1's centres plus one more
+//!   (`make_curve_fall`).
 //! - `r(K) = sum_m sum_{i in C_m} ||z_i - mu_m||^2`.
 //! - K selection ([`Selection`]):
 //!   - `Sod`: the second-order difference of `l(K) = log r(K)`,
@@ -592,6 +596,35 @@ fn argmax(scores: &[(usize, f64)]) -> Option<usize> {
         .map(|b| b.0)
 }
 
+/// Makes the residual curve fall as the optimum it estimates does (`r(K) <= r(K - 1)`): where the
+/// best of K's restarts ends above the clustering kept for K - 1 (every k-means++ restart can miss,
+/// and tight clusters make it likelier), K is clustered again from K - 1's centres plus the point
+/// farthest from its centre. That start costs at most r(K - 1) and Lloyd's iterations never raise
+/// the cost, so the result is kept when lower. `runs[i]` holds K = i + 1; a curve that already
+/// falls is left untouched, so K's clustering is its own restarts' unless they lost to K - 1's.
+fn make_curve_fall(p: Points, runs: &mut [KMeans], max_iter: usize) {
+    for i in 1..runs.len() {
+        let prev = &runs[i - 1];
+        if runs[i].residual <= prev.residual {
+            continue;
+        }
+        let dim = p.dim;
+        let cost = |j: usize| {
+            let c = prev.labels[j];
+            sq_dist(p.row(j), &prev.centroids[c * dim..(c + 1) * dim])
+        };
+        let far = (0..p.len())
+            .max_by(|&a, &b| cost(a).total_cmp(&cost(b)))
+            .expect("k <= n, so n >= 1");
+        let mut init = prev.centroids.clone();
+        init.extend(p.row(far).iter().map(|&v| f64::from(v)));
+        let warm = lloyd(p, i + 1, init, max_iter);
+        if warm.residual < runs[i].residual {
+            runs[i] = warm;
+        }
+    }
+}
+
 /// Clusters embeddings, choosing K as `params` says, on the calling thread.
 pub fn cluster(p: Points, params: &ClusterParams) -> Result<Clustering, ClusterError> {
     cluster_on(p, params, &Threads::default())
@@ -622,7 +655,8 @@ pub fn cluster_on(
                 Selection::Sod => (k_max + 1).min(n),
                 _ => k_max,
             };
-            let runs: Vec<KMeans> = threads.install(|| threads.map_range(1..=top, run));
+            let mut runs: Vec<KMeans> = threads.install(|| threads.map_range(1..=top, run));
+            make_curve_fall(p, &mut runs, iters);
             let residuals: Vec<(usize, f64)> = runs
                 .iter()
                 .enumerate()
@@ -690,6 +724,44 @@ mod tests {
             .seed(9)
             .build()
             .unwrap()
+    }
+
+    #[test]
+    fn a_curve_that_rises_is_made_to_fall_and_one_that_falls_is_untouched() {
+        let (data, truth) = blobs(3, 20);
+        let p = Points::new(&data, 2).unwrap();
+        let mut runs: Vec<KMeans> = (1..=3).map(|k| kmeans(p, k, 4, 100, 0)).collect();
+        let before = runs.clone();
+        make_curve_fall(p, &mut runs, 100);
+        assert_eq!(runs, before, "a falling curve is left as it is");
+        // A K = 3 clustering that lost every restart: all points in one cluster, two empty
+        // centres far away, so r(3) = r(1) > r(2).
+        let mean = before[0].centroids.clone();
+        let bad = KMeans {
+            labels: vec![0; p.len()],
+            centroids: [mean, vec![50.0, 50.0], vec![-50.0, 50.0]].concat(),
+            residual: before[0].residual,
+        };
+        assert!(bad.residual > before[1].residual);
+        runs[2] = bad;
+        make_curve_fall(p, &mut runs, 100);
+        assert!(
+            runs[2].residual <= runs[1].residual,
+            "{} > {}",
+            runs[2].residual,
+            runs[1].residual
+        );
+        // Restarted from K = 2's centres plus the farthest point, it finds the three blobs.
+        assert_eq!(runs[2].centroids.len(), 3 * 2);
+        let pairs: std::collections::BTreeSet<(usize, usize)> = truth
+            .iter()
+            .copied()
+            .zip(runs[2].labels.iter().copied())
+            .collect();
+        assert_eq!(pairs.len(), 3, "one cluster per blob: {pairs:?}");
+        assert!(
+            (runs[2].residual - before[2].residual).abs() <= 1e-6 * before[2].residual.max(1.0)
+        );
     }
 
     #[test]
