@@ -682,7 +682,6 @@ pub fn cluster_on(
             } else {
                 argmax(&scores).unwrap_or(k_max)
             };
-            let mut runs = runs;
             (runs.swap_remove(k - 1), residuals, scores)
         }
     };

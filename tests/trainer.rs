@@ -432,7 +432,26 @@ fn train_on_lce_batches_with_validation() {
             .any(|m| m["name"] == "validation_error_known_k")
     );
 
-    // The same samples generated in memory train the same network, weight for weight.
+    // The same samples generated in memory: evaluated by one model they give the same rows as the
+    // files (names, errors, residual curves), and they train and validate a model as files do.
+    // (Weights are not compared: training is not bit-reproducible from run to run.)
+    let eval_json = |data: &str| -> Value {
+        let text = ok(&[
+            "eval",
+            "--model",
+            s(&out),
+            "--data",
+            data,
+            "--k-max",
+            "4",
+            "--json",
+        ]);
+        serde_json::from_str(&text).unwrap()
+    };
+    let from_disk = eval_json(s(&train_dir));
+    let from_memory = eval_json("lce:mixed,count=8,seed=1,points=12");
+    assert_eq!(from_disk["rows"].as_array().unwrap().len(), 8);
+    assert_eq!(from_disk["rows"], from_memory["rows"]);
     let out2 = temp("lce-model-mem");
     let run_dir2 = temp("lce-run-mem");
     let mut args = vec![
@@ -454,13 +473,16 @@ fn train_on_lce_batches_with_validation() {
     ];
     args.extend(TINY);
     ok(&args);
-    let weights = |dir: &Path| std::fs::read(dir.join("weights.safetensors")).unwrap();
-    assert!(
-        weights(&out) == weights(&out2),
-        "in-memory LCE data trained other weights"
-    );
     let card2: Value =
         serde_json::from_slice(&std::fs::read(out2.join("model.json")).unwrap()).unwrap();
+    let validated = card2["metrics"].as_array().unwrap().iter().any(|m| {
+        m["name"] == "validation_error_known_k"
+            && m["protocol"]
+                .as_str()
+                .unwrap()
+                .contains("on 2 validation samples")
+    });
+    assert!(validated, "{}", card2["metrics"]);
     assert!(
         card2["training"]["data"]
             .as_str()
