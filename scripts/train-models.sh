@@ -13,25 +13,29 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
     case $m in
       kt3dmoseg)
         # Every 5-frame clip (not only the paper's non-overlapping ones), each also mirrored,
-        # reversed in time and both, with CE; four seeds of that recipe, combined into one
+        # reversed in time and both, with CE, and local neighbourhoods (offsets to the 8 nearest
+        # trajectories, graph aggregation over 8); two seeds of that recipe, combined into one
         # ensemble model: the recipe with the lowest cross-validated error (docs/RESULTS.md,
-        # "KT3DMoSeg augment"). Each seed trains on one thread.
-        for seed in 0 1 2 3; do
-          $T train --name kt3dmoseg --out runs/kt3dmoseg-s$seed/model --run-dir runs/kt3dmoseg-s$seed \
-            --data "$data/kt3dmoseg" --protocol augment --clip-len 5 \
-            --clip-stride 1 --symmetry mirror,reverse --seed $seed \
-            --loss ce --embed-dim 5 --width 128 --depth 12 --lr 1e-3 --schedule cosine --epochs 6 --k-max 8 \
+        # "Local neighbourhoods"). The cards' runs used two threads each.
+        for seed in 0 1; do
+          dir=runs/kt3dmoseg-g8; [ $seed = 0 ] || dir=runs/kt3dmoseg-g8-s$seed
+          $T train --name kt3dmoseg --out $dir/model --run-dir $dir \
+            --data "$data/kt3dmoseg" --protocol augment --clip-len 5 --clip-stride 1 --symmetry mirror,reverse --seed $seed \
+            --loss ce --embed-dim 5 --width 128 --depth 12 --neighbors 8 --graph-neighbors 8 \
+            --lr 1e-3 --schedule cosine --epochs 6 --k-max 8 \
             --describe "KT3DMoSeg, all 22 sequences, 'Augment' protocol with overlapping clips: every 5-frame clip (296 clips), each also mirrored, reversed in time, and both"
         done
-        $T ensemble --model runs/kt3dmoseg-s0/model --model runs/kt3dmoseg-s1/model \
-          --model runs/kt3dmoseg-s2/model --model runs/kt3dmoseg-s3/model --out models/kt3dmoseg --name kt3dmoseg ;;
+        $T ensemble --model runs/kt3dmoseg-g8/model --model runs/kt3dmoseg-g8-s1/model \
+          --out models/kt3dmoseg --name kt3dmoseg ;;
       adelaide-homography)
         $T train --name adelaide-homography --data "$data/adelaidermf" --model-type homography \
           --loss mimi --embed-dim 8 --width 128 --depth 12 --lr 1e-3 --schedule cosine --epochs 100 --k-max 8 \
           --describe "AdelaideRMF homography (planes), all 17 available pairs, outliers as one more group" ;;
       adelaide-fundamental)
+        # With local neighbourhoods (docs/RESULTS.md, "Local neighbourhoods on AdelaideRMF").
         $T train --name adelaide-fundamental --data "$data/adelaidermf" --model-type fundamental \
-          --loss mimi --embed-dim 6 --width 128 --depth 12 --lr 1e-3 --schedule cosine --epochs 100 --k-max 8 \
+          --loss mimi --embed-dim 6 --width 128 --depth 12 --neighbors 8 --graph-neighbors 8 \
+          --lr 1e-3 --schedule cosine --epochs 100 --k-max 8 \
           --describe "AdelaideRMF fundamental (rigid motions), all 19 pairs, outliers as one more group" ;;
       lce)
         # Scale 2: the generator scale at which sequential RANSAC told the true types and counts
@@ -39,40 +43,34 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         # Stage 1: 20 epochs over 8000 samples. Stage 2: a warm restart over 48000 samples, the
         # 8000 and 40000 new ones. Stages 3 to 42: warm restarts over 32000 and then 24000 more
         # new ones each. More data, not more epochs, is what helps (docs/RESULTS.md, "LCE").
-        gen() { [ -d "runs/data/$1" ] || $T gen-lce --out "runs/data/$1" --scale 2 "${@:2}"; }
-        gen lce2-train --count 4000 --seed 1 --variant mixed
-        gen lce2-unmixed-train --count 4000 --seed 2 --variant unmixed
-        gen lce2-val --count 100 --seed 3 --variant mixed
-        gen lce2-val2 --count 400 --seed 81 --variant mixed
-        gen lce2-train-c --count 20000 --seed 21 --variant mixed
-        gen lce2-unmixed-train-c --count 20000 --seed 22 --variant unmixed
-        gen lce2-train-d --count 16000 --seed 31 --variant mixed
-        gen lce2-unmixed-train-d --count 16000 --seed 32 --variant unmixed
+        # The samples are generated in memory (--data lce:...), the same ones gen-lce writes with
+        # the same settings (runs/data/lce2-* in docs/RESULTS.md); nothing is written to disk.
+        lce() { echo "lce:$1,count=$2,seed=$3,scale=2"; }
+        val=(--val "$(lce mixed 100 3)")
         common="50 points per shape, noise 0.05; validation 100 mixed samples (seed 3)"
         net="--loss l2 --embed-dim 6 --width 128 --depth 12 --neighbors 16 --graph-neighbors 16 --batch-size 16 --schedule cosine --k-max 6"
         $T train --name lce --out runs/lce-stage1/model --run-dir runs/lce-stage1 \
-          --data runs/data/lce2-train --data runs/data/lce2-unmixed-train --val runs/data/lce2-val \
+          --data "$(lce mixed 4000 1)" --data "$(lce unmixed 4000 2)" "${val[@]}" \
           $net --lr 2e-3 --epochs ${LCE_EPOCHS:-20} \
           --describe "Synthetic LCE at scale 2: 4000 mixed + 4000 unmixed samples, $common"
         $T train --name lce --init runs/lce-stage1/model --out runs/lce-stage2/model --run-dir runs/lce-stage2 \
-          --data runs/data/lce2-train --data runs/data/lce2-unmixed-train --data runs/data/lce2-train-c --data runs/data/lce2-unmixed-train-c \
-          --val runs/data/lce2-val $net --lr 1e-3 --epochs 4 --seed 1 \
+          --data "$(lce mixed 4000 1)" --data "$(lce unmixed 4000 2)" --data "$(lce mixed 20000 21)" --data "$(lce unmixed 20000 22)" \
+          "${val[@]}" $net --lr 1e-3 --epochs 4 --seed 1 \
           --describe "Synthetic LCE at scale 2: 24000 mixed + 24000 unmixed samples (seeds 1, 21 and 2, 22), $common"
         $T train --name lce --init runs/lce-stage2/model --out runs/lce-stage3/model --run-dir runs/lce-stage3 \
-          --data runs/data/lce2-train-d --data runs/data/lce2-unmixed-train-d \
-          --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed 2 \
+          --data "$(lce mixed 16000 31)" --data "$(lce unmixed 16000 32)" \
+          "${val[@]}" $net --lr 1e-3 --epochs 3 --seed 2 \
           --describe "Synthetic LCE at scale 2: 16000 new mixed + 16000 new unmixed samples (seeds 31, 32), $common"
         # Stages 4 on: a warm restart of the stage before over 3 epochs of 12000 + 12000 new samples,
         # generated with seeds MIXED_SEED and MIXED_SEED + 1; training seed STAGE - 1.
-        # restart STAGE SET MIXED_SEED OUT [FLAGS]
+        # restart STAGE SET MIXED_SEED OUT [FLAGS]   (SET names the stage's runs/data/lce2-*-SET
+        # directories of docs/RESULTS.md)
         restart() {
-          local n=$1 set=$2 s=$3 out=$4
+          local n=$1 s=$3 out=$4
           shift 4
-          gen "lce2-train-$set" --count 12000 --seed "$s" --variant mixed
-          gen "lce2-unmixed-train-$set" --count 12000 --seed "$((s + 1))" --variant unmixed
           $T train --name lce --init "runs/lce-stage$((n - 1))/model" --out "$out" --run-dir "runs/lce-stage$n" \
-            --data "runs/data/lce2-train-$set" --data "runs/data/lce2-unmixed-train-$set" \
-            --val runs/data/lce2-val $net --lr 1e-3 --epochs 3 --seed "$((n - 1))" "$@" \
+            --data "$(lce mixed 12000 "$s")" --data "$(lce unmixed 12000 "$((s + 1))")" \
+            "${val[@]}" $net --lr 1e-3 --epochs 3 --seed "$((n - 1))" "$@" \
             --describe "Synthetic LCE at scale 2: 12000 new mixed + 12000 new unmixed samples (seeds $s, $((s + 1))), $common"
         }
         restart 4 e 41 runs/lce-stage4/model

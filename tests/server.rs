@@ -60,7 +60,7 @@ fn fits_a_real_kt3dmoseg_sequence() {
     assert_eq!(auto.status, 200, "{}", auto.text());
     let v = auto.json();
     assert_eq!(v["model"]["name"], "kt3dmoseg");
-    // An ensemble: the digest covers every network's weight file.
+    // The digest covers every weight file the model has.
     assert_eq!(
         v["model"]["weights_sha256"],
         shipped_weights_sha256("kt3dmoseg")
@@ -94,15 +94,58 @@ fn fits_a_real_kt3dmoseg_sequence() {
     assert_eq!(m.status, 200, "{}", m.text());
     assert_eq!(labels(&m.json()), labels(&known.json()));
 
-    // The shipped kt3dmoseg is an ensemble: each row sets the unit embeddings of every network of
-    // every image side by side, scaled to unit length. Its test symmetries (mirror, reverse: each
-    // its own inverse, and they commute) give 2^m images with them on, the input alone with them off.
-    let card: Value = serde_json::from_slice(
-        &std::fs::read(common::repo().join("models/kt3dmoseg/model.json")).unwrap(),
-    )
-    .unwrap();
+    // Embeddings as the card says: with test symmetries (mirror, reverse: each its own inverse,
+    // and they commute) 2^m images side by side, the input alone with them off.
+    check_ensemble_embeddings(&server, &file, &common::repo().join("models/kt3dmoseg"));
+
+    // The shipped card's first network alone, and twice as an ensemble, each served from a models
+    // directory of its own: two copies of one network embed each point twice, scaled to unit
+    // length, which k-means splits as it splits the network alone.
+    let shipped = common::repo().join("models/kt3dmoseg");
+    let card: Value =
+        serde_json::from_slice(&std::fs::read(shipped.join("model.json")).unwrap()).unwrap();
+    let serve = |tag: &str, copies: usize| {
+        let dir = common::Scratch::new(tag);
+        let model = dir.join("kt3dmoseg");
+        std::fs::create_dir(&model).unwrap();
+        let mut card = card.clone();
+        let mut members = Vec::new();
+        for i in 0..copies {
+            let file = if i == 0 {
+                "weights.safetensors".to_string()
+            } else {
+                format!("weights-{i}.safetensors")
+            };
+            std::fs::copy(shipped.join("weights.safetensors"), model.join(&file)).unwrap();
+            if i > 0 {
+                members.push(
+                    json!({"weights": file, "loss": card["loss"], "training": card["training"]}),
+                );
+            }
+        }
+        card["members"] = json!(members);
+        std::fs::write(model.join("model.json"), serde_json::to_vec(&card).unwrap()).unwrap();
+        let server = Server::start_with_models(&dir, &[]);
+        (dir, model, server)
+    };
+    let (_d1, _, alone) = serve("kt-alone", 1);
+    let (_d2, pair_dir, pair) = serve("kt-pair", 2);
+    check_ensemble_embeddings(&pair, &file, &pair_dir);
+    let body = fit_body(&file, json!({"k": file["num_models"], "seed": 3}));
+    let one = alone.post_json("/v1/fit", &body);
+    let two = pair.post_json("/v1/fit", &body);
+    assert_eq!((one.status, two.status), (200, 200), "{}", two.text());
+    assert_eq!(labels(&two.json()), labels(&one.json()));
+}
+
+/// The embeddings the server returns for `file` under the model in `dir`: one unit row per point,
+/// `embed_dim` values for each network and each test-symmetry image (with the flag on), each
+/// such block of length 1/sqrt(networks * images).
+fn check_ensemble_embeddings(server: &Server, file: &Value, dir: &std::path::Path) {
+    let n = file["points"].as_array().unwrap().len();
+    let card: Value =
+        serde_json::from_slice(&std::fs::read(dir.join("model.json")).unwrap()).unwrap();
     let networks = 1 + card["members"].as_array().map_or(0, Vec::len);
-    assert!(networks > 1, "kt3dmoseg ships as an ensemble");
     let e = card["architecture"]["embed_dim"].as_u64().unwrap() as usize;
     let symmetries = card["test_symmetries"].as_array().map_or(0, Vec::len);
     for flag in [true, false] {
@@ -110,7 +153,7 @@ fn fits_a_real_kt3dmoseg_sequence() {
         let r = server.post_json(
             "/v1/fit",
             &fit_body(
-                &file,
+                file,
                 json!({"k": file["num_models"], "return_embeddings": true, "test_symmetries": flag}),
             ),
         );
@@ -121,10 +164,10 @@ fn fits_a_real_kt3dmoseg_sequence() {
             assert_eq!(row.len(), e * networks * images);
             let norm: f64 = row.iter().map(|x| x * x).sum();
             assert!((norm - 1.0).abs() < 1e-3, "unit rows: {norm}");
-            // Every network's block has length 1/sqrt(networks).
             for block in row.chunks(e) {
                 let b: f64 = block.iter().map(|x| x * x).sum();
-                assert!((b * networks as f64 - 1.0).abs() < 1e-3, "block {b}");
+                let m = (networks * images) as f64;
+                assert!((b * m - 1.0).abs() < 1e-3, "block {b}");
             }
         }
     }
