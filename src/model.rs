@@ -313,11 +313,13 @@ impl EmbeddingNet {
 
     /// Writes the weights as safetensors.
     pub fn save(&self, path: &Path) -> Result<(), ModelError> {
-        let mut store = SafetensorsStore::from_file(path).overwrite(true);
-        self.save_into(&mut store).map_err(|e| ModelError::Save {
+        let err = |reason: String| ModelError::Save {
             path: path.display().to_string(),
-            reason: e.to_string(),
-        })
+            reason,
+        };
+        let mut store = SafetensorsStore::from_file(path).overwrite(true);
+        self.save_into(&mut store).map_err(|e| err(e.to_string()))?;
+        sort_safetensors_header(path).map_err(err)
     }
 
     /// Loads weights written by [`EmbeddingNet::save`] into a network built from `config`.
@@ -355,6 +357,42 @@ pub fn cpu_device() -> Device {
     {
         Device::ndarray()
     }
+}
+
+/// Rewrites a safetensors file's JSON header with its keys sorted. burn fills the header's
+/// `__metadata__` from a hash map, so its key order, and with it the file's bytes and
+/// `weights_sha256`, changed from save to save of the same weights; sorted, the same weights always
+/// give the same file. The tensor data and their offsets (relative to the data) are unchanged.
+fn sort_safetensors_header(path: &Path) -> Result<(), String> {
+    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+    let len = bytes
+        .get(..8)
+        .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")) as usize)
+        .filter(|&n| 8 + n <= bytes.len())
+        .ok_or("not a safetensors file: bad header length")?;
+    let header: std::collections::BTreeMap<String, serde_json::Value> =
+        serde_json::from_slice(&bytes[8..8 + len]).map_err(|e| format!("header: {e}"))?;
+    let sorted: std::collections::BTreeMap<&String, serde_json::Value> = header
+        .iter()
+        .map(|(k, v)| match v.as_object() {
+            // Nested objects (the metadata, each tensor's entry) sorted too.
+            Some(o) => {
+                let inner: std::collections::BTreeMap<_, _> = o.iter().collect();
+                (k, serde_json::json!(inner))
+            }
+            None => (k, v.clone()),
+        })
+        .collect();
+    let mut text = serde_json::to_string(&sorted).map_err(|e| e.to_string())?;
+    // The data starts 8-aligned, as the format asks: pad the header with spaces.
+    while text.len() % 8 != 0 {
+        text.push(' ');
+    }
+    let mut out = Vec::with_capacity(8 + text.len() + bytes.len() - 8 - len);
+    out.extend_from_slice(&(text.len() as u64).to_le_bytes());
+    out.extend_from_slice(text.as_bytes());
+    out.extend_from_slice(&bytes[8 + len..]);
+    std::fs::write(path, out).map_err(|e| e.to_string())
 }
 
 #[cfg(test)]
@@ -486,6 +524,23 @@ mod tests {
             let back = EmbeddingNet::load(&cfg, &path, &device).unwrap();
             let p = points(11, 4);
             assert_eq!(net.embed(&p, 4, &device), back.embed(&p, 4, &device));
+            // The same weights give the same file, save after save (burn's header metadata comes
+            // from a hash map; 8 saves would all agree by chance with probability 6^-7).
+            let first = std::fs::read(&path).unwrap();
+            for _ in 0..7 {
+                back.save(&path).unwrap();
+                assert!(
+                    std::fs::read(&path).unwrap() == first,
+                    "a save changed the file"
+                );
+            }
+            let n = u64::from_le_bytes(first[..8].try_into().unwrap()) as usize;
+            let header = std::str::from_utf8(&first[8..8 + n]).unwrap();
+            assert!(
+                header.starts_with(r#"{"__metadata__":{"format":"safetensors","producer":"burn""#),
+                "{header}"
+            );
+            assert_eq!((8 + n) % 8, 0, "data 8-aligned");
             // A card that disagrees with the weights is refused.
             let wrong = ModelConfig {
                 width: 8,

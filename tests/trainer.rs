@@ -433,8 +433,7 @@ fn train_on_lce_batches_with_validation() {
     );
 
     // The same samples generated in memory: evaluated by one model they give the same rows as the
-    // files (names, errors, residual curves), and they train and validate a model as files do.
-    // (Weights are not compared: training is not bit-reproducible from run to run.)
+    // files (names, errors, residual curves), and they train the same network, file for file.
     let eval_json = |data: &str| -> Value {
         let text = ok(&[
             "eval",
@@ -473,6 +472,11 @@ fn train_on_lce_batches_with_validation() {
     ];
     args.extend(TINY);
     ok(&args);
+    let weights = |dir: &Path| std::fs::read(dir.join("weights.safetensors")).unwrap();
+    assert!(
+        weights(&out) == weights(&out2),
+        "in-memory LCE data trained other weights"
+    );
     let card2: Value =
         serde_json::from_slice(&std::fs::read(out2.join("model.json")).unwrap()).unwrap();
     let validated = card2["metrics"].as_array().unwrap().iter().any(|m| {
