@@ -236,10 +236,14 @@ pub struct LceSpec {
 }
 
 impl LceSpec {
-    /// Checks what a generator needs: a valid config and at least one sample.
+    /// Most samples one spec may ask for: a million samples of 200 points take about 4 GB once
+    /// loaded, past what a training here can use (the shipped chain's largest stage had 48000).
+    pub const MAX_COUNT: usize = 1_000_000;
+
+    /// Checks what a generator needs: a valid config and 1 to [`Self::MAX_COUNT`] samples.
     pub fn validate(&self) -> Result<(), String> {
-        if self.count == 0 {
-            return Err("count must be at least 1".into());
+        if self.count == 0 || self.count > Self::MAX_COUNT {
+            return Err(format!("count must be 1 to {}", Self::MAX_COUNT));
         }
         self.config.validate()
     }
@@ -381,7 +385,8 @@ mod tests {
         assert_eq!((defaults.count, defaults.seed), (200, 0));
         for (bad, says) in [
             ("triangles", "unknown LCE variant"),
-            ("mixed,count=0", "count must be at least 1"),
+            ("mixed,count=0", "count must be 1 to 1000000"),
+            ("mixed,count=1000001", "count must be 1 to 1000000"),
             ("mixed,count=-3", "count=\"-3\""),
             ("mixed,scale=0", "scale must be finite and positive"),
             ("mixed,noise=nan", "noise finite"),
