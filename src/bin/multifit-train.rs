@@ -68,7 +68,7 @@ struct GenLceArgs {
     seed: u64,
     /// mixed (line, 2 ellipses, circle) or unmixed (2-4 of one type).
     #[arg(long, value_enum, default_value = "mixed")]
-    variant: VariantArg,
+    variant: LceVariant,
     #[arg(long, default_value_t = 50)]
     points_per_shape: usize,
     /// Gaussian noise sigma on the unit-scale frame.
@@ -77,12 +77,6 @@ struct GenLceArgs {
     /// Multiplies every shape length but not the noise (2 = half the relative noise).
     #[arg(long, default_value_t = 1.0)]
     scale: f64,
-}
-
-#[derive(Clone, Copy, Debug, clap::ValueEnum)]
-enum VariantArg {
-    Mixed,
-    Unmixed,
 }
 
 /// Data selection shared by train, eval and cv.
@@ -351,10 +345,7 @@ fn progress(len: u64) -> ProgressBar {
 
 fn gen_lce(a: GenLceArgs) -> Result<()> {
     let spec = LceSpec {
-        variant: match a.variant {
-            VariantArg::Mixed => LceVariant::Mixed,
-            VariantArg::Unmixed => LceVariant::Unmixed,
-        },
+        variant: a.variant,
         count: a.count,
         seed: a.seed,
         config: LceConfig {

@@ -37,7 +37,7 @@ impl Shape {
 }
 
 /// Which LCE variant to generate.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum LceVariant {
     /// One line, two ellipses and one circle.
