@@ -454,23 +454,16 @@ fn every_error_answers_with_the_json_shape() {
 
 #[test]
 fn overload_answers_429_and_timeouts_503() {
-    let server = Server::start(&["--workers", "1", "--queue-capacity", "0"]);
-    let s = LceGenerator::new(
-        1,
-        LceConfig {
-            points_per_shape: 2500,
-            noise: 0.05,
-            ..LceConfig::default()
-        },
-    )
-    .sample(LceVariant::Mixed, "big")
-    .sample;
-    let rows: Vec<Vec<f64>> = (0..s.points.len())
-        .map(|i| s.points.row(i).to_vec())
-        .collect();
-    let body =
-        serde_json::to_vec(&json!({"kind": "points2d", "points": rows, "selection": "silhouette"}))
-            .unwrap();
+    // The admitted fit must answer 200 however loaded the machine: no request timeout in reach.
+    let server = Server::start(&[
+        "--workers",
+        "1",
+        "--queue-capacity",
+        "0",
+        "--request-timeout-ms",
+        "600000",
+    ]);
+    let (body, _) = common::slow_fit_body(1, 2500, &[]);
     let addr = server.addr;
     let post = |body: Vec<u8>| {
         std::thread::spawn(move || {
@@ -600,23 +593,9 @@ fn models_health_metrics_and_openapi() {
 
 #[test]
 fn sigterm_drains_in_flight_requests_and_exits_zero() {
-    let server = Server::start(&[]);
-    let s = LceGenerator::new(
-        2,
-        LceConfig {
-            points_per_shape: 2000,
-            noise: 0.05,
-            ..LceConfig::default()
-        },
-    )
-    .sample(LceVariant::Mixed, "big")
-    .sample;
-    let rows: Vec<Vec<f64>> = (0..s.points.len())
-        .map(|i| s.points.row(i).to_vec())
-        .collect();
-    let body =
-        serde_json::to_vec(&json!({"kind": "points2d", "points": rows, "selection": "silhouette"}))
-            .unwrap();
+    // The in-flight fit must answer 200 however loaded the machine: no request timeout in reach.
+    let server = Server::start(&["--request-timeout-ms", "600000"]);
+    let (body, _) = common::slow_fit_body(2, 2000, &[]);
     let addr = server.addr;
     let in_flight = std::thread::spawn(move || {
         common::send(addr, "POST", "/v1/fit", Some("application/json"), body)

@@ -18,27 +18,11 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use common::{Server, labels, send, wait_queue_depth};
-use multifit::data::synthetic::{LceConfig, LceGenerator, LceVariant};
 use serde_json::{Value, json};
 
-/// A points2d fit of `4 * per_shape` LCE points with silhouette selection (slow-ish: the lce
-/// model's 16-neighbour features and the silhouette are quadratic in N).
+/// A slow points2d fit of `4 * per_shape` LCE points (tests/common::slow_fit_body), seeded.
 fn slow_body(per_shape: usize) -> (Vec<u8>, usize) {
-    let s = LceGenerator::new(
-        5,
-        LceConfig {
-            points_per_shape: per_shape,
-            noise: 0.05,
-            ..LceConfig::default()
-        },
-    )
-    .sample(LceVariant::Mixed, "load")
-    .sample;
-    let rows: Vec<Vec<f64>> = (0..s.points.len())
-        .map(|i| s.points.row(i).to_vec())
-        .collect();
-    let body = json!({"kind": "points2d", "points": rows, "selection": "silhouette", "seed": 9});
-    (serde_json::to_vec(&body).unwrap(), rows.len())
+    common::slow_fit_body(5, per_shape, &[("seed", json!(9))])
 }
 
 fn signal(pid: u32, sig: &str) {
@@ -97,8 +81,10 @@ fn closed_by_server(s: &mut TcpStream) -> bool {
 #[test]
 fn sigterm_under_load_completes_in_flight_refuses_new_and_exits_zero() {
     let started = Instant::now();
-    // Two workers, five concurrent fits and a batch: two run, the rest wait in the queue.
-    let mut server = Server::start(&["--workers", "2"]);
+    // Two workers, five concurrent fits and a batch: two run, the rest wait in the queue. The
+    // request timeout is far beyond the drain, so that a loaded machine (seven fits of 4800
+    // points, one after another on each worker) cannot turn a queued fit into a 503.
+    let mut server = Server::start(&["--workers", "2", "--request-timeout-ms", "600000"]);
     let addr = server.addr;
     let (body, n) = slow_body(1200);
 

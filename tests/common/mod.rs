@@ -320,3 +320,30 @@ pub fn truth(v: &Value) -> Vec<usize> {
         .collect();
     multifit::data::dataset::renumber(&raw).0
 }
+
+/// The body of a points2d fit of `4 * per_shape` generated LCE points (one line, one circle, two
+/// ellipses; generator `seed`) with silhouette selection, and its point count: a fit slow enough
+/// (the lce model's neighbour features and the silhouette grow with N) to still be running while
+/// a test loads or signals the server.
+pub fn slow_fit_body(seed: u64, per_shape: usize, extra: &[(&str, Value)]) -> (Vec<u8>, usize) {
+    use multifit::data::synthetic::{LceConfig, LceGenerator, LceVariant};
+    let s = LceGenerator::new(
+        seed,
+        LceConfig {
+            points_per_shape: per_shape,
+            noise: 0.05,
+            ..LceConfig::default()
+        },
+    )
+    .sample(LceVariant::Mixed, "slow")
+    .sample;
+    let rows: Vec<Vec<f64>> = (0..s.points.len())
+        .map(|i| s.points.row(i).to_vec())
+        .collect();
+    let mut body =
+        serde_json::json!({"kind": "points2d", "points": rows, "selection": "silhouette"});
+    for (key, value) in extra {
+        body[*key] = value.clone();
+    }
+    (serde_json::to_vec(&body).unwrap(), rows.len())
+}
