@@ -20,11 +20,6 @@ use std::time::{Duration, Instant};
 use common::{Server, labels, send, wait_queue_depth};
 use serde_json::{Value, json};
 
-/// A slow points2d fit of `4 * per_shape` LCE points (tests/common::slow_fit_body), seeded.
-fn slow_body(per_shape: usize) -> (Vec<u8>, usize) {
-    common::slow_fit_body(5, per_shape, &[("seed", json!(9))])
-}
-
 fn signal(pid: u32, sig: &str) {
     let ok = Command::new("kill")
         .args([sig, &pid.to_string()])
@@ -86,7 +81,7 @@ fn sigterm_under_load_completes_in_flight_refuses_new_and_exits_zero() {
     // points, one after another on each worker) cannot turn a queued fit into a 503.
     let mut server = Server::start(&["--workers", "2", "--request-timeout-ms", "600000"]);
     let addr = server.addr;
-    let (body, n) = slow_body(1200);
+    let (body, n) = common::slow_fit_body(5, 1200, &[("seed", json!(9))]);
 
     // Reference answer before any load: same input and seed, same labels.
     let t = Instant::now();
