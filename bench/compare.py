@@ -15,9 +15,9 @@ What it does, in order:
    in-process Python peer fit (from the numpy array of raw pixels to labels, so the peer pays no
    parsing or HTTP; one BLAS / OpenMP thread unless `--py-threads` says otherwise); p50 / p90 of
    both and the ratio, twice: interleaved (one server fit, one peer fit, alternating) and in
-   blocks (each side's R fits back to back). On this project's VM a core left idle for ~100 ms
-   runs the next few milliseconds of work up to 1.8x slower, so interleaving makes every server
-   fit start cold while the peer's 130 ms fits amortise it; blocks show each side warm;
+   blocks (each side's R fits back to back). Where a core left idle for ~100 ms runs the next few
+   milliseconds of work slower (benches/wake.rs), interleaving makes every server fit start cold
+   while the peer's longer fits amortise it; blocks show each side warm;
 5. throughput: C client threads send the same request back to back for T seconds against the
    server with `--workers 1`, then the one with `--workers 2`, alternating for `--rounds` rounds
    (the servers run side by side; an idle one costs nothing); requests per second summed over the
@@ -28,7 +28,7 @@ What it does, in order:
 Everything is on the loopback interface, every loop is bounded, and the servers it started are
 stopped (SIGTERM, then SIGKILL after 15 s) even when a step fails.
 
-    python3 bench/compare.py                              # full run (lead's measurement)
+    python3 bench/compare.py                              # full run
     python3 bench/compare.py --requests 20 --seconds 5    # quick run
     python3 bench/compare.py --url http://127.0.0.1:8080  # a running server (no worker sweep)
 
@@ -216,7 +216,7 @@ def latency(url: str, peer: python_peer.Model, request: dict, points, image,
             requests: int, warmup: int, order: str) -> dict:
     """R server fits and R peer fits, after `warmup` of each. `order` "interleaved": one server
     fit, then one peer fit, and so on, so every fit starts right after ~100 ms of the other
-    side's work (on a VM whose idle core slows down, each server fit then starts cold);
+    side's work (where an idle core slows down, each server fit then starts cold);
     "blocks": the R server fits back to back, then the R peer fits back to back (each side warm,
     as under steady traffic)."""
     body = json.dumps(request).encode()

@@ -1,6 +1,6 @@
-//! How long a rayon pool's second thread takes to join work after the pool sat idle: the reason
-//! a fit that follows an idle spell runs nearly single-threaded on this project's VM (see README,
-//! "Performance"). Each round sleeps, then runs `rayon::join` of 2 ms of spinning and a closure
+//! How long a rayon pool's second thread takes to join work after the pool sat idle, which can
+//! leave a fit that follows an idle spell nearly single-threaded (docs/PERFORMANCE.md). Each
+//! round sleeps, then runs `rayon::join` of 2 ms of spinning and a closure
 //! that records when it starts: if the pool's other thread is awake it steals that closure at
 //! once; if not, the first thread runs it after its 2 ms.
 //! Run: `cargo bench --bench wake`. Prints medians and 90th percentiles of 30 rounds.

@@ -16,7 +16,7 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         # reversed in time and both, with CE, and local neighbourhoods (offsets to the 8 nearest
         # trajectories, graph aggregation over 8); two seeds of that recipe, combined into one
         # ensemble model: the recipe with the lowest cross-validated error (docs/RESULTS.md,
-        # "Local neighbourhoods"). The cards' runs used two threads each.
+        # "KT3DMoSeg augment"). The cards' runs used two threads each.
         for seed in 0 1; do
           dir=runs/kt3dmoseg-g8; [ $seed = 0 ] || dir=runs/kt3dmoseg-g8-s$seed
           $T train --name kt3dmoseg --out $dir/model --run-dir $dir \
@@ -32,7 +32,7 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
           --loss mimi --embed-dim 8 --width 128 --depth 12 --lr 1e-3 --schedule cosine --epochs 100 --k-max 8 \
           --describe "AdelaideRMF homography (planes), all 17 available pairs, outliers as one more group" ;;
       adelaide-fundamental)
-        # With local neighbourhoods (docs/RESULTS.md, "Local neighbourhoods on AdelaideRMF").
+        # With local neighbourhoods (docs/RESULTS.md, "AdelaideRMF fundamental").
         $T train --name adelaide-fundamental --data "$data/adelaidermf" --model-type fundamental \
           --loss mimi --embed-dim 6 --width 128 --depth 12 --neighbors 8 --graph-neighbors 8 \
           --lr 1e-3 --schedule cosine --epochs 100 --k-max 8 \
@@ -42,9 +42,9 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         # scores what the paper's Seq. baselines do (docs/RESULTS.md, "LCE").
         # Stage 1: 20 epochs over 8000 samples. Stage 2: a warm restart over 48000 samples, the
         # 8000 and 40000 new ones. Stages 3 to 42: warm restarts over 32000 and then 24000 more
-        # new ones each. More data, not more epochs, is what helps (docs/RESULTS.md, "LCE").
+        # new ones each. More data, not more epochs, is what helps (docs/TRAINING.md, "lce").
         # The samples are generated in memory (--data lce:...), the same ones gen-lce writes with
-        # the same settings (runs/data/lce2-* in docs/RESULTS.md); nothing is written to disk.
+        # the same settings; nothing is written to disk.
         lce() { echo "lce:$1,count=$2,seed=$3,scale=2"; }
         val=(--val "$(lce mixed 100 3)")
         common="50 points per shape, noise 0.05; validation 100 mixed samples (seed 3)"
@@ -63,8 +63,8 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
           --describe "Synthetic LCE at scale 2: 16000 new mixed + 16000 new unmixed samples (seeds 31, 32), $common"
         # Stages 4 on: a warm restart of the stage before over 3 epochs of 12000 + 12000 new samples,
         # generated with seeds MIXED_SEED and MIXED_SEED + 1; training seed STAGE - 1.
-        # restart STAGE SET MIXED_SEED OUT [FLAGS]   (SET names the stage's runs/data/lce2-*-SET
-        # directories of docs/RESULTS.md)
+        # restart STAGE SET MIXED_SEED OUT [FLAGS]   (SET names the stage's data sets, as the
+        # runs/data/lce2-*-SET directories in the model card's command)
         restart() {
           local n=$1 s=$3 out=$4
           shift 4
@@ -76,7 +76,7 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         restart 4 e 41 runs/lce-stage4/model
         restart 5 f 51 runs/lce-stage5/model
         # Test symmetries (mirror x quarter turns, 8 images per fit), chosen on the validation
-        # samples (docs/RESULTS.md, "Test-time symmetries").
+        # samples (docs/RESULTS.md, "LCE").
         sym=(--test-symmetry mirror,rotate)
         restart 6 g 61 runs/lce-stage6/model "${sym[@]}"
         # Stages 7 to 13 were each kept over the stage before on 500 validation samples with the

@@ -516,10 +516,11 @@ mod tests {
                 ..tiny()
             };
             let net = cfg.init_seeded(&device, 5).unwrap();
-            let dir = std::env::temp_dir()
-                .join(format!("multifit-model-test-{}-{bn}", std::process::id()));
-            std::fs::create_dir_all(&dir).unwrap();
-            let path = dir.join("weights.safetensors");
+            let dir = tempfile::Builder::new()
+                .prefix("multifit-model-test-")
+                .tempdir()
+                .unwrap();
+            let path = dir.path().join("weights.safetensors");
             net.save(&path).unwrap();
             let back = EmbeddingNet::load(&cfg, &path, &device).unwrap();
             let p = points(11, 4);
@@ -558,7 +559,6 @@ mod tests {
                 EmbeddingNet::load(&deeper, &path, &device),
                 Err(ModelError::Load { .. })
             ));
-            std::fs::remove_dir_all(&dir).unwrap();
         }
     }
 

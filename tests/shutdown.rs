@@ -1,4 +1,4 @@
-//! Issue 6: SIGTERM under load. In-flight requests (running, queued for a worker, and a batch)
+//! SIGTERM under load. In-flight requests (running, queued for a worker, and a batch)
 //! complete with full answers; once the signal is handled new connections are refused (or
 //! answered 503) while the drain is still going on; idle and silent connections do not hold the
 //! process; it exits 0.
@@ -257,13 +257,9 @@ fn sigint_and_repeated_sigterm_on_an_idle_server_exit_zero() {
     }
 }
 
-// ---------------------------------------------------------------------------------------------
-// Regressions: bugs found while testing shutdown, fixed since.
-// ---------------------------------------------------------------------------------------------
-
 /// A client that has sent only part of a request (headers without the blank line, or headers
-/// and part of a declared body) used to keep the server from exiting after SIGTERM for as long
-/// as it stayed connected. The drain is now bounded by the request timeout plus a second.
+/// and part of a declared body) and stays connected does not keep the server from exiting after
+/// SIGTERM: the drain is bounded by the request timeout plus a second.
 #[test]
 fn a_stalled_partial_request_does_not_block_exit_after_sigterm() {
     let cases: [(&str, &[u8]); 2] = [

@@ -1,5 +1,7 @@
-//! The one JSON error shape of the API, `{"error": {"code", "message"}}`, and the JSON extractor
-//! that uses it for every rejection (malformed JSON, wrong content type, oversize body).
+//! The one JSON error shape of the API, `{"error": {"code", "message"}}`; [`ErrorCode`], every
+//! code the API answers with its status and meaning (openapi.yaml lists the same); and the JSON
+//! extractor that uses the shape for every rejection (malformed JSON, wrong content type,
+//! oversize body).
 
 use axum::body::Bytes;
 use axum::extract::{FromRequest, Request};
@@ -10,13 +12,102 @@ use serde::de::DeserializeOwned;
 
 use crate::cluster::ClusterError;
 use crate::data::InputError;
-use crate::registry::FitError;
+use crate::pipeline::FitError;
 
-/// An API failure: HTTP status, a stable machine-readable code and a human message.
+/// Declares [`ErrorCode`] from one table: variant, wire code, HTTP status, meaning.
+macro_rules! error_codes {
+    ($($variant:ident = $code:literal, $status:ident, $meaning:literal;)+) => {
+        /// A stable machine-readable error code: each carries its HTTP status and a one-line
+        /// meaning. openapi.yaml (`components.schemas.Error`) lists exactly these.
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+        pub enum ErrorCode {
+            $(#[doc = $meaning] $variant,)+
+        }
+
+        impl ErrorCode {
+            /// Every code, in the order of the table.
+            pub const ALL: &'static [ErrorCode] = &[$(Self::$variant),+];
+
+            /// The code as it appears in the JSON body.
+            pub const fn as_str(self) -> &'static str {
+                match self {
+                    $(Self::$variant => $code,)+
+                }
+            }
+
+            /// The HTTP status every answer with this code has.
+            pub const fn status(self) -> StatusCode {
+                match self {
+                    $(Self::$variant => StatusCode::$status,)+
+                }
+            }
+
+            /// What the code means, in one line.
+            pub const fn meaning(self) -> &'static str {
+                match self {
+                    $(Self::$variant => $meaning,)+
+                }
+            }
+        }
+    };
+}
+
+error_codes! {
+    MalformedJson = "malformed_json", BAD_REQUEST,
+        "The body is not JSON: a syntax error, or not UTF-8.";
+    BadRequest = "bad_request", BAD_REQUEST,
+        "The request body could not be read.";
+    NotFound = "not_found", NOT_FOUND,
+        "No such route, model or example.";
+    MethodNotAllowed = "method_not_allowed", METHOD_NOT_ALLOWED,
+        "The route does not take this method.";
+    BodyTooLarge = "body_too_large", PAYLOAD_TOO_LARGE,
+        "The body is larger than the server's --body-limit.";
+    UnsupportedMediaType = "unsupported_media_type", UNSUPPORTED_MEDIA_TYPE,
+        "The content type is not application/json (or application/*+json).";
+    InvalidRequest = "invalid_request", UNPROCESSABLE_ENTITY,
+        "JSON of the wrong shape: unknown, missing or mistyped fields, or fields that clash.";
+    InvalidPoints = "invalid_points", UNPROCESSABLE_ENTITY,
+        "Unusable points or image_size: too few rows, wrong widths, non-finite or huge values.";
+    InvalidClustering = "invalid_clustering", UNPROCESSABLE_ENTITY,
+        "The clustering parameters are inconsistent.";
+    InvalidK = "invalid_k", UNPROCESSABLE_ENTITY,
+        "k outside 1..=N (the number of points), or k_max outside 1..=--max-k-max.";
+    InvalidSelection = "invalid_selection", UNPROCESSABLE_ENTITY,
+        "selection is neither sod nor silhouette.";
+    UnknownKind = "unknown_kind", UNPROCESSABLE_ENTITY,
+        "kind is not points2d, correspondences or trajectories.";
+    UnknownModel = "unknown_model", UNPROCESSABLE_ENTITY,
+        "No loaded model has that name, or none serves the request's kind.";
+    ModelMismatch = "model_mismatch", UNPROCESSABLE_ENTITY,
+        "The model takes another kind or row width (for tracks: another frame count).";
+    TooManyPoints = "too_many_points", UNPROCESSABLE_ENTITY,
+        "More points than the server's --max-points.";
+    TooManyFrames = "too_many_frames", UNPROCESSABLE_ENTITY,
+        "Rows of more than 2 x --max-frames values.";
+    TooManyRequestsInBatch = "too_many_requests_in_batch", UNPROCESSABLE_ENTITY,
+        "More batch entries than the server's --max-batch.";
+    Overloaded = "overloaded", TOO_MANY_REQUESTS,
+        "The request queue is full; retry after Retry-After seconds.";
+    Internal = "internal", INTERNAL_SERVER_ERROR,
+        "An unexpected failure in the server.";
+    Timeout = "timeout", SERVICE_UNAVAILABLE,
+        "The fit did not finish within --request-timeout-ms, queueing included.";
+    NotReady = "not_ready", SERVICE_UNAVAILABLE,
+        "The models are still loading, or the server is draining to stop.";
+}
+
+impl std::fmt::Display for ErrorCode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// An API failure: a code (which fixes the HTTP status) and a human message. As a response it
+/// carries its [`ErrorCode`] as an extension, which the metrics middleware counts.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ApiError {
-    pub status: StatusCode,
-    pub code: &'static str,
+    pub code: ErrorCode,
     pub message: String,
     /// Seconds for a `Retry-After` header (429).
     pub retry_after: Option<u64>,
@@ -34,49 +125,48 @@ pub struct ErrorDetail<'a> {
 }
 
 impl ApiError {
-    pub fn new(status: StatusCode, code: &'static str, message: impl Into<String>) -> Self {
+    pub fn new(code: ErrorCode, message: impl Into<String>) -> Self {
         Self {
-            status,
             code,
             message: message.into(),
             retry_after: None,
         }
     }
-    pub fn invalid(code: &'static str, message: impl Into<String>) -> Self {
-        Self::new(StatusCode::UNPROCESSABLE_ENTITY, code, message)
-    }
     pub fn not_found(message: impl Into<String>) -> Self {
-        Self::new(StatusCode::NOT_FOUND, "not_found", message)
+        Self::new(ErrorCode::NotFound, message)
     }
     pub fn overloaded() -> Self {
         Self {
             retry_after: Some(1),
             ..Self::new(
-                StatusCode::TOO_MANY_REQUESTS,
-                "overloaded",
+                ErrorCode::Overloaded,
                 "the request queue is full; retry later",
             )
         }
     }
     pub fn timeout() -> Self {
         Self::new(
-            StatusCode::SERVICE_UNAVAILABLE,
-            "timeout",
+            ErrorCode::Timeout,
             "the request did not finish within the server's timeout",
         )
     }
     pub fn not_ready(message: impl Into<String>) -> Self {
-        Self::new(StatusCode::SERVICE_UNAVAILABLE, "not_ready", message)
+        Self::new(ErrorCode::NotReady, message)
     }
     pub fn internal(message: impl Into<String>) -> Self {
-        Self::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", message)
+        Self::new(ErrorCode::Internal, message)
+    }
+
+    /// The HTTP status, the code's.
+    pub fn status(&self) -> StatusCode {
+        self.code.status()
     }
 
     /// The JSON body, also used inside batch results.
     pub fn body(&self) -> serde_json::Value {
         serde_json::to_value(ErrorBody {
             error: ErrorDetail {
-                code: self.code,
+                code: self.code.as_str(),
                 message: &self.message,
             },
         })
@@ -86,25 +176,26 @@ impl ApiError {
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        let mut response = (self.status, axum::Json(self.body())).into_response();
+        let mut response = (self.status(), axum::Json(self.body())).into_response();
         if let Some(secs) = self.retry_after {
             response
                 .headers_mut()
                 .insert(header::RETRY_AFTER, HeaderValue::from(secs));
         }
+        response.extensions_mut().insert(self.code);
         response
     }
 }
 
 impl From<InputError> for ApiError {
     fn from(e: InputError) -> Self {
-        Self::invalid("invalid_points", e.to_string())
+        Self::new(ErrorCode::InvalidPoints, e.to_string())
     }
 }
 
 impl From<ClusterError> for ApiError {
     fn from(e: ClusterError) -> Self {
-        Self::invalid("invalid_clustering", e.to_string())
+        Self::new(ErrorCode::InvalidClustering, e.to_string())
     }
 }
 
@@ -112,7 +203,7 @@ impl From<FitError> for ApiError {
     fn from(e: FitError) -> Self {
         match e {
             FitError::Cluster(c) => c.into(),
-            other => Self::invalid("model_mismatch", other.to_string()),
+            other => Self::new(ErrorCode::ModelMismatch, other.to_string()),
         }
     }
 }
@@ -151,19 +242,14 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         // shape: 422.
         if let Err(e) = std::str::from_utf8(bytes) {
             return ApiError::new(
-                StatusCode::BAD_REQUEST,
-                "malformed_json",
+                ErrorCode::MalformedJson,
                 format!("the body is not UTF-8: {e}"),
             );
         }
         if let Err(syntax) = serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
-            return ApiError::new(
-                StatusCode::BAD_REQUEST,
-                "malformed_json",
-                syntax.to_string(),
-            );
+            return ApiError::new(ErrorCode::MalformedJson, syntax.to_string());
         }
-        ApiError::invalid("invalid_request", message)
+        ApiError::new(ErrorCode::InvalidRequest, message)
     })
 }
 
@@ -177,20 +263,15 @@ where
     async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
         if !is_json(req.headers()) {
             return Err(ApiError::new(
-                StatusCode::UNSUPPORTED_MEDIA_TYPE,
-                "unsupported_media_type",
+                ErrorCode::UnsupportedMediaType,
                 "expected a request with `content-type: application/json`",
             ));
         }
         let bytes = Bytes::from_request(req, state).await.map_err(|e| {
             if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
-                ApiError::new(
-                    StatusCode::PAYLOAD_TOO_LARGE,
-                    "body_too_large",
-                    e.body_text(),
-                )
+                ApiError::new(ErrorCode::BodyTooLarge, e.body_text())
             } else {
-                ApiError::new(StatusCode::BAD_REQUEST, "bad_request", e.body_text())
+                ApiError::new(ErrorCode::BadRequest, e.body_text())
             }
         })?;
         parse_json(&bytes).map(Self)

@@ -7,10 +7,10 @@ use std::time::{Duration, Instant};
 
 use axum::extract::rejection::PathRejection;
 use axum::extract::{DefaultBodyLimit, MatchedPath, Path, Request, State};
-use axum::http::{HeaderName, HeaderValue, StatusCode, header};
+use axum::http::{HeaderMap, HeaderName, HeaderValue, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
-use axum::routing::{get, post};
+use axum::routing::{MethodRouter, get, post};
 use axum::{Json, Router};
 use serde_json::json;
 use tokio::sync::Semaphore;
@@ -19,9 +19,12 @@ use tower_http::request_id::{
 };
 use tower_http::trace::TraceLayer;
 
-use super::error::{ApiError, ApiJson};
-use super::telemetry::{ENDPOINTS, Telemetry};
+use super::error::{ApiError, ApiJson, ErrorCode};
+use super::linger::linger;
+use super::telemetry::{EntryErrors, Telemetry};
 use super::types::{BatchRequest, FitJob, FitRequest, FitResponse, Limits};
+use super::{page, picture};
+use crate::pipeline::{self, FitOptions};
 use crate::registry::LoadedModel;
 
 /// The OpenAPI description served at `/openapi.yaml`.
@@ -103,7 +106,62 @@ impl MakeRequestId for Ids {
     }
 }
 
-/// The full router with every layer, over `state`.
+/// One route: its path and its handlers by method.
+pub struct Route {
+    /// The path in axum's syntax, also the route's `endpoint` label in the metrics.
+    pub path: &'static str,
+    methods: fn() -> MethodRouter<Shared>,
+    /// Whether requests pass [`admit`] (the fit routes) before their body is read.
+    admitted: bool,
+}
+
+impl Route {
+    const fn open(path: &'static str, methods: fn() -> MethodRouter<Shared>) -> Self {
+        Self {
+            path,
+            methods,
+            admitted: false,
+        }
+    }
+    const fn admitted(path: &'static str, methods: fn() -> MethodRouter<Shared>) -> Self {
+        Self {
+            path,
+            methods,
+            admitted: true,
+        }
+    }
+}
+
+/// Every route of the service. [`router`] is built from this table alone and [`ENDPOINTS`]
+/// lists its paths, so each route the router serves is counted by name in the metrics.
+pub const ROUTES: [Route; 10] = [
+    Route::open("/", || get(page::index)),
+    Route::open("/examples/{file}", || get(page::example)),
+    Route::admitted("/v1/fit", || post(fit)),
+    Route::admitted("/v1/fit/batch", || post(fit_batch)),
+    Route::open("/v1/models", || get(list_models)),
+    Route::open("/v1/models/{name}", || get(get_model)),
+    Route::open("/health/live", || get(live)),
+    Route::open("/health/ready", || get(ready)),
+    Route::open("/metrics", || get(metrics)),
+    Route::open("/openapi.yaml", || get(openapi)),
+];
+
+/// The paths of [`ROUTES`], in order: the endpoints the metrics count by name (any other
+/// request is counted as "other").
+pub const ENDPOINTS: [&str; ROUTES.len()] = {
+    let mut paths = [""; ROUTES.len()];
+    let mut i = 0;
+    while i < ROUTES.len() {
+        paths[i] = ROUTES[i].path;
+        i += 1;
+    }
+    paths
+};
+
+/// The full router with every layer, over `state`: the routes of [`ROUTES`], JSON errors for
+/// an unknown route or method, metrics ([`track`]) and the lingering close of request bodies
+/// left unread ([`super::linger`]).
 pub fn router(state: Shared, body_limit: usize) -> Router {
     let request_id = HeaderName::from_static("x-request-id");
     let prefix = std::time::SystemTime::now()
@@ -113,25 +171,19 @@ pub fn router(state: Shared, body_limit: usize) -> Router {
         prefix,
         next: Arc::new(AtomicU64::new(1)),
     };
-    let fits = Router::new()
-        .route("/v1/fit", post(fit))
-        .route("/v1/fit/batch", post(fit_batch))
-        .route_layer(middleware::from_fn_with_state(
-            (state.clone(), body_limit),
-            admit,
-        ));
-    Router::new()
-        .merge(fits)
-        .route("/v1/models", get(list_models))
-        .route("/v1/models/{name}", get(get_model))
-        .route("/health/live", get(live))
-        .route("/health/ready", get(ready))
-        .route("/metrics", get(metrics))
-        .route("/openapi.yaml", get(openapi))
-        .fallback(not_found)
+    let mut app = Router::new();
+    for route in &ROUTES {
+        let mut methods = (route.methods)();
+        if route.admitted {
+            methods = methods.route_layer(middleware::from_fn_with_state(state.clone(), admit));
+        }
+        app = app.route(route.path, methods);
+    }
+    app.fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(body_limit))
         .layer(middleware::from_fn_with_state(state.clone(), track))
+        .layer(middleware::from_fn_with_state(body_limit, linger))
         .layer(TraceLayer::new_for_http().make_span_with(|req: &axum::http::Request<_>| {
             let id = req.headers().get("x-request-id").and_then(|v| v.to_str().ok()).unwrap_or("-");
             tracing::info_span!("request", method = %req.method(), path = %req.uri().path(), request_id = %id)
@@ -141,7 +193,9 @@ pub fn router(state: Shared, body_limit: usize) -> Router {
         .with_state(state)
 }
 
-/// Counts every request by endpoint and status, and its duration.
+/// Counts every request by endpoint and status, and its duration; and the rejections, once each:
+/// the code of an error answer, the codes of a batch answer's failed entries (the rule is in
+/// [`super::telemetry`]).
 async fn track(State(state): State<Shared>, req: Request, next: Next) -> Response {
     let endpoint = req
         .extensions()
@@ -158,6 +212,14 @@ async fn track(State(state): State<Shared>, req: Request, next: Next) -> Respons
     t.requests
         .with_label_values(&[&endpoint, response.status().as_str()])
         .inc();
+    if let Some(&code) = response.extensions().get::<ErrorCode>() {
+        t.reject(code);
+    }
+    if let Some(EntryErrors(codes)) = response.extensions().get::<EntryErrors>() {
+        for &code in codes {
+            t.reject(code);
+        }
+    }
     response
 }
 
@@ -167,25 +229,19 @@ async fn not_found() -> ApiError {
 
 async fn method_not_allowed() -> ApiError {
     ApiError::new(
-        StatusCode::METHOD_NOT_ALLOWED,
-        "method_not_allowed",
+        ErrorCode::MethodNotAllowed,
         "method not allowed on this route",
     )
 }
 
 /// Admission for the fit routes, before the body is parsed: past `workers + queue_capacity`
-/// requests in the house the answer is 429 at once, its body read and dropped unparsed (so the
-/// connection stays usable and the answer arrives), so a flood of large bodies costs neither
-/// parsing nor memory. A request whose client goes away before its answer is counted as
-/// abandoned (a fit still queued is then never run).
-async fn admit(
-    State((state, body_limit)): State<(Shared, usize)>,
-    req: Request,
-    next: Next,
-) -> Response {
+/// requests in the house the answer is 429 at once, its body left unparsed (the lingering close
+/// reads and drops it, so the answer arrives), so a flood of large bodies costs neither parsing
+/// nor memory. A request whose client goes away before its answer is counted as abandoned (a fit
+/// still queued is then never run).
+async fn admit(State(state): State<Shared>, req: Request, next: Next) -> Response {
     let Ok(_permit) = state.admitted.clone().try_acquire_owned() else {
-        discard_body(req.into_body(), body_limit, state.timeout).await;
-        return counted(&state, ApiError::overloaded()).into_response();
+        return ApiError::overloaded().into_response();
     };
     let t = &state.telemetry;
     t.queue_depth.inc();
@@ -199,24 +255,6 @@ async fn admit(
     let response = next.run(req).await;
     answered.store(true, Ordering::Relaxed);
     response
-}
-
-/// Reads and drops a body of up to `limit` bytes (nothing is buffered or parsed), so that an
-/// early answer leaves the connection in step and reaches the client: closing a connection with
-/// unread request data can reset it and lose the answer.
-async fn discard_body(body: axum::body::Body, limit: usize, timeout: Duration) {
-    use http_body_util::BodyExt;
-    let drain = async {
-        let mut body = body;
-        let mut seen = 0usize;
-        while let Some(Ok(frame)) = body.frame().await {
-            seen += frame.data_ref().map_or(0, |d| d.len());
-            if seen > limit {
-                break;
-            }
-        }
-    };
-    let _ = tokio::time::timeout(timeout, drain).await;
 }
 
 /// Waits for a worker and runs one validated fit off the async runtime (the request was
@@ -240,9 +278,12 @@ async fn run_fit(state: &AppState, job: FitJob) -> Result<FitResponse, ApiError>
             } else {
                 &[]
             };
-            let outcome = job
-                .model
-                .fit_with(&job.points, job.image_size, &job.params, symmetries);
+            let options = FitOptions {
+                params: &job.params,
+                symmetries,
+                refine: job.refine,
+            };
+            let outcome = pipeline::fit(&job.model, &job.points, job.image_size, &options);
             (job, outcome)
         });
         let (job, outcome) = handle
@@ -256,7 +297,7 @@ async fn run_fit(state: &AppState, job: FitJob) -> Result<FitResponse, ApiError>
     t.embed_seconds.observe(outcome.embed_ms / 1e3);
     t.cluster_seconds.observe(outcome.cluster_ms / 1e3);
     t.points.observe(job.points.len() as f64);
-    t.chosen_k.observe(outcome.clustering.k as f64);
+    t.chosen_k.observe(outcome.k as f64);
     Ok(FitResponse::new(
         &job,
         outcome,
@@ -277,55 +318,61 @@ fn scopeguard<F: FnOnce()>(f: F) -> impl Drop {
     Guard(Some(f))
 }
 
-fn counted(state: &AppState, e: ApiError) -> ApiError {
-    state.telemetry.reject(e.code);
-    e
-}
-
+/// `POST /v1/fit`: JSON, or the picture when `Accept` asks for `image/svg+xml`
+/// ([`picture::wants_svg`]); errors are JSON either way.
 async fn fit(
     State(state): State<Shared>,
+    headers: HeaderMap,
     body: Result<ApiJson<FitRequest>, ApiError>,
-) -> Result<Json<FitResponse>, ApiError> {
-    let ApiJson(request) = body.map_err(|e| counted(&state, e))?;
-    let models = state.models().map_err(|e| counted(&state, e))?;
-    let job = request
-        .validate(models, &state.limits)
-        .map_err(|e| counted(&state, e))?;
-    run_fit(&state, job)
+) -> Result<Response, ApiError> {
+    let ApiJson(request) = body?;
+    let job = request.validate(state.models()?, &state.limits)?;
+    // The picture needs the points, which the fit consumes with the job.
+    let drawn = picture::wants_svg(&headers).then(|| (job.points.clone(), job.image_size));
+    let fitted = run_fit(&state, job).await?;
+    let Some((points, image_size)) = drawn else {
+        return Ok(([(header::VARY, "accept")], Json(fitted)).into_response());
+    };
+    let svg = tokio::task::spawn_blocking(move || picture::svg(&points, image_size, &fitted))
         .await
-        .map(Json)
-        .map_err(|e| counted(&state, e))
+        .map_err(|e| ApiError::internal(format!("picture failed: {e}")))?;
+    Ok(picture::response(svg))
 }
 
+/// `POST /v1/fit/batch`: every entry parsed, validated and fitted on its own; the answer
+/// carries the codes of the failed entries ([`EntryErrors`]) for the metrics.
 async fn fit_batch(
     State(state): State<Shared>,
     body: Result<ApiJson<BatchRequest>, ApiError>,
-) -> Result<Json<serde_json::Value>, ApiError> {
-    let ApiJson(batch) = body.map_err(|e| counted(&state, e))?;
-    let models = state.models().map_err(|e| counted(&state, e))?;
+) -> Result<Response, ApiError> {
+    let ApiJson(batch) = body?;
+    let models = state.models()?;
     if batch.requests.len() > state.limits.max_batch {
-        return Err(counted(
-            &state,
-            ApiError::invalid(
-                "too_many_requests_in_batch",
-                format!("at most {} requests per batch", state.limits.max_batch),
-            ),
+        return Err(ApiError::new(
+            ErrorCode::TooManyRequestsInBatch,
+            format!("at most {} requests per batch", state.limits.max_batch),
         ));
     }
     let mut results = Vec::with_capacity(batch.requests.len());
+    let mut failed = EntryErrors::default();
     for raw in batch.requests {
         let one = async {
             let request: FitRequest = serde_json::from_value(raw)
-                .map_err(|e| ApiError::invalid("invalid_request", e.to_string()))?;
+                .map_err(|e| ApiError::new(ErrorCode::InvalidRequest, e.to_string()))?;
             let job = request.validate(models, &state.limits)?;
             run_fit(&state, job).await
         };
         results.push(match one.await {
             Ok(r) => serde_json::to_value(r).map_err(|e| ApiError::internal(e.to_string()))?,
-            Err(e) => counted(&state, e).body(),
+            Err(e) => {
+                failed.0.push(e.code);
+                e.body()
+            }
         });
     }
-    Ok(Json(json!({ "results": results })))
+    let mut response = Json(json!({ "results": results })).into_response();
+    response.extensions_mut().insert(failed);
+    Ok(response)
 }
 
 async fn list_models(State(state): State<Shared>) -> Result<Json<serde_json::Value>, ApiError> {

@@ -11,7 +11,6 @@ use tokio::net::TcpListener;
 
 use super::routes::{AppState, router};
 use super::types::Limits;
-use crate::model::ModelError;
 use crate::registry::{RegistryError, load_all};
 use crate::threads::Threads;
 
@@ -23,7 +22,8 @@ pub enum LogFormat {
     Json,
 }
 
-/// A checked server configuration.
+/// A server configuration as given; [`ServerConfig::validate`] checks it into the
+/// [`ValidServerConfig`] that [`serve`] takes.
 #[derive(Debug, Clone, Serialize)]
 pub struct ServerConfig {
     pub addr: SocketAddr,
@@ -39,11 +39,42 @@ pub struct ServerConfig {
     pub log_format: LogFormat,
 }
 
+/// A [`ServerConfig`] whose ranges are checked; only [`ServerConfig::validate`] makes one.
+#[derive(Debug, Clone, Serialize)]
+#[serde(transparent)]
+pub struct ValidServerConfig(ServerConfig);
+
+impl std::ops::Deref for ValidServerConfig {
+    type Target = ServerConfig;
+    fn deref(&self) -> &ServerConfig {
+        &self.0
+    }
+}
+
+/// Why a configuration is refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ConfigError {
+    #[error("invalid configuration: body limit must be at least 1024 bytes, got {0}")]
+    BodyLimit(usize),
+    #[error("invalid configuration: max points must be at least 2, got {0}")]
+    MaxPoints(usize),
+    #[error("invalid configuration: max frames must be at least 2, got {0}")]
+    MaxFrames(usize),
+    #[error("invalid configuration: max k_max must be at least 1")]
+    MaxKMax,
+    #[error("invalid configuration: max batch must be at least 1")]
+    MaxBatch,
+    #[error("invalid configuration: workers must be at least 1")]
+    Workers,
+    #[error("invalid configuration: fit threads must be at least 1")]
+    FitThreads,
+    #[error("invalid configuration: request timeout must be positive")]
+    RequestTimeout,
+}
+
 /// Why the server could not start or stopped with an error.
 #[derive(Debug, thiserror::Error)]
 pub enum ServerError {
-    #[error("invalid configuration: {0}")]
-    Config(String),
     #[error("cannot listen on {addr}: {source}")]
     Bind {
         addr: SocketAddr,
@@ -51,39 +82,42 @@ pub enum ServerError {
     },
     #[error("cannot load models: {0}")]
     Models(#[from] RegistryError),
+    #[error("cannot start {count} fit threads: {source}")]
+    Threads {
+        count: usize,
+        source: rayon::ThreadPoolBuildError,
+    },
     #[error("server failed: {0}")]
     Io(#[from] std::io::Error),
 }
 
 impl ServerConfig {
-    /// Checks ranges; returns the config unchanged when valid.
-    pub fn validate(self) -> Result<Self, ServerError> {
-        let bad = |m: &str| Err(ServerError::Config(m.to_string()));
-        if self.body_limit < 1024 {
-            return bad("body limit must be at least 1024 bytes");
+    /// Checks ranges.
+    pub fn validate(self) -> Result<ValidServerConfig, ConfigError> {
+        let limits = &self.limits;
+        let error = if self.body_limit < 1024 {
+            Some(ConfigError::BodyLimit(self.body_limit))
+        } else if limits.max_points < 2 {
+            Some(ConfigError::MaxPoints(limits.max_points))
+        } else if limits.max_frames < 2 {
+            Some(ConfigError::MaxFrames(limits.max_frames))
+        } else if limits.max_k_max == 0 {
+            Some(ConfigError::MaxKMax)
+        } else if limits.max_batch == 0 {
+            Some(ConfigError::MaxBatch)
+        } else if self.workers == 0 {
+            Some(ConfigError::Workers)
+        } else if self.fit_threads == 0 {
+            Some(ConfigError::FitThreads)
+        } else if self.request_timeout.is_zero() {
+            Some(ConfigError::RequestTimeout)
+        } else {
+            None
+        };
+        match error {
+            Some(e) => Err(e),
+            None => Ok(ValidServerConfig(self)),
         }
-        if self.limits.max_points < 2 {
-            return bad("max points must be at least 2");
-        }
-        if self.limits.max_frames < 2 {
-            return bad("max frames must be at least 2");
-        }
-        if self.limits.max_k_max == 0 {
-            return bad("max k_max must be at least 1");
-        }
-        if self.limits.max_batch == 0 {
-            return bad("max batch must be at least 1");
-        }
-        if self.workers == 0 {
-            return bad("workers must be at least 1");
-        }
-        if self.fit_threads == 0 {
-            return bad("fit threads must be at least 1");
-        }
-        if self.request_timeout.is_zero() {
-            return bad("request timeout must be positive");
-        }
-        Ok(self)
     }
 }
 
@@ -91,7 +125,7 @@ impl ServerConfig {
 /// SIGTERM or Ctrl-C, then stops accepting, finishes in-flight requests and returns.
 /// `on_bound` receives the bound address (useful with port 0).
 pub async fn serve(
-    config: ServerConfig,
+    config: ValidServerConfig,
     on_bound: impl FnOnce(SocketAddr),
 ) -> Result<(), ServerError> {
     let listener = TcpListener::bind(config.addr)
@@ -111,24 +145,22 @@ pub async fn serve(
     tracing::info!(%addr, "listening");
     on_bound(addr);
 
-    let (failed_tx, failed_rx) = tokio::sync::oneshot::channel::<RegistryError>();
+    let (failed_tx, failed_rx) = tokio::sync::oneshot::channel::<ServerError>();
     let loader_state = state.clone();
     let dir = config.models.clone();
     let fit_threads = config.fit_threads;
     tokio::task::spawn_blocking(move || {
         let loaded = Threads::new(fit_threads)
-            .map_err(|e| {
-                RegistryError::Weights(ModelError::Config(format!(
-                    "cannot start {fit_threads} fit threads: {e}"
-                )))
+            .map_err(|source| ServerError::Threads {
+                count: fit_threads,
+                source,
             })
             .and_then(|pool| {
-                load_all(&dir).map(|models| {
-                    models
-                        .into_iter()
-                        .map(|(name, m)| (name, m.with_pool(pool.clone())))
-                        .collect::<std::collections::BTreeMap<_, _>>()
-                })
+                let models = load_all(&dir)?;
+                Ok(models
+                    .into_iter()
+                    .map(|(name, m)| (name, m.with_pool(pool.clone())))
+                    .collect::<std::collections::BTreeMap<_, _>>())
             });
         match loaded {
             Ok(models) => {
@@ -153,7 +185,7 @@ pub async fn serve(
             Ok(e) = failed_rx => Some(e),
         }
     };
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<Option<RegistryError>>();
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<Option<ServerError>>();
     let (draining_tx, draining_rx) = tokio::sync::oneshot::channel::<()>();
     let server = axum::serve(listener, app).with_graceful_shutdown(async move {
         let outcome = shutdown.await;
@@ -178,7 +210,7 @@ pub async fn serve(
         }
     }
     match stop_rx.await {
-        Ok(Some(e)) => Err(e.into()),
+        Ok(Some(e)) => Err(e),
         _ => {
             tracing::info!("stopped");
             Ok(())

@@ -1,22 +1,23 @@
 //! Prometheus metrics of the service. Every family is registered, and the common label sets
 //! initialised, at start, so `/metrics` is never empty.
+//!
+//! Rejections (`multifit_rejections_total{reason}`) are counted in one place, the `track`
+//! middleware of [`super::routes`], from the response: an error answer carries its
+//! [`ErrorCode`] as a response extension (set by `ApiError::into_response`) and counts once under
+//! [`rejection_reason`]; a batch answer (200) carries the codes of its failed entries
+//! ([`EntryErrors`]) and counts each of them once. Handlers never count. Codes without a reason
+//! (unknown route or model, wrong method, not ready, internal failure) are not rejections.
 
 use prometheus::{
     Encoder, Histogram, HistogramOpts, HistogramVec, IntCounterVec, IntGauge, IntGaugeVec, Opts,
     Registry, TextEncoder,
 };
 
-/// The endpoints counted by name (anything else is counted as "other").
-pub const ENDPOINTS: [&str; 8] = [
-    "/v1/fit",
-    "/v1/fit/batch",
-    "/v1/models",
-    "/v1/models/{name}",
-    "/health/live",
-    "/health/ready",
-    "/metrics",
-    "/openapi.yaml",
-];
+use super::error::ErrorCode;
+
+/// The endpoints counted by name (anything else is counted as "other"): the paths of the
+/// router's table, [`super::routes::ROUTES`].
+pub use super::routes::ENDPOINTS;
 
 /// Reasons a request is rejected before computing.
 pub const REJECTIONS: [&str; 6] = [
@@ -170,19 +171,42 @@ impl Telemetry {
         String::from_utf8(buf).expect("utf-8")
     }
 
-    /// The rejection reason counted for an error code.
-    pub fn reject(&self, code: &str) {
-        let reason = match code {
-            "malformed_json" | "bad_request" => "malformed",
-            "body_too_large" => "too_large",
-            "unsupported_media_type" => "unsupported_media_type",
-            "overloaded" => "overloaded",
-            "timeout" => "timeout",
-            _ => "invalid",
-        };
-        self.rejections.with_label_values(&[reason]).inc();
+    /// Counts one rejection with `code`, under its [`rejection_reason`] (if it has one).
+    pub fn reject(&self, code: ErrorCode) {
+        if let Some(reason) = rejection_reason(code) {
+            self.rejections.with_label_values(&[reason]).inc();
+        }
     }
 }
+
+/// The reason (one of [`REJECTIONS`]) a request answered with `code` counts under, or `None`
+/// when the code is no rejection of a request's content or of its admission.
+pub fn rejection_reason(code: ErrorCode) -> Option<&'static str> {
+    use ErrorCode as E;
+    Some(match code {
+        E::MalformedJson | E::BadRequest => "malformed",
+        E::BodyTooLarge => "too_large",
+        E::UnsupportedMediaType => "unsupported_media_type",
+        E::Overloaded => "overloaded",
+        E::Timeout => "timeout",
+        E::InvalidRequest
+        | E::InvalidPoints
+        | E::InvalidClustering
+        | E::InvalidK
+        | E::InvalidSelection
+        | E::UnknownKind
+        | E::UnknownModel
+        | E::ModelMismatch
+        | E::TooManyPoints
+        | E::TooManyFrames
+        | E::TooManyRequestsInBatch => "invalid",
+        E::NotFound | E::MethodNotAllowed | E::NotReady | E::Internal => return None,
+    })
+}
+
+/// Response extension of a batch answer: the codes of its entries that failed, in order.
+#[derive(Debug, Clone, Default)]
+pub struct EntryErrors(pub Vec<ErrorCode>);
 
 impl Default for Telemetry {
     fn default() -> Self {

@@ -5,10 +5,13 @@ use std::sync::Arc;
 
 use serde::{Deserialize, Serialize};
 
-use super::error::ApiError;
+use super::error::{ApiError, ErrorCode};
 use crate::cluster::{ClusterParams, Clustering, Selection};
 use crate::data::{ImageSize, Kind, PointSet};
-use crate::registry::{FitOutcome, LoadedModel};
+use crate::geometry::Model;
+use crate::refine::RefineParams;
+use crate::pipeline::FitOutcome;
+use crate::registry::LoadedModel;
 
 /// Request limits, from the server config.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -45,6 +48,15 @@ pub struct FitRequest {
     /// False: embed the input alone, skipping the model's test-time symmetries.
     #[serde(default)]
     pub test_symmetries: Option<bool>,
+    /// Geometric refinement and structures; default: the model card's.
+    #[serde(default)]
+    pub refine: Option<bool>,
+    /// Whether refinement may label points -1 (outliers); default true.
+    #[serde(default)]
+    pub outliers: Option<bool>,
+    /// A fixed outlier threshold in the caller's units instead of the estimated one.
+    #[serde(default)]
+    pub outlier_threshold: Option<f64>,
 }
 
 /// `POST /v1/fit/batch` body as sent; entries are parsed one by one so that a bad entry gets
@@ -65,6 +77,8 @@ pub struct FitJob {
     pub return_embeddings: bool,
     /// Whether the fit uses the card's test-time symmetries.
     pub test_symmetries: bool,
+    /// Geometric refinement, or `None` for the learned clustering alone.
+    pub refine: Option<RefineParams>,
 }
 
 /// The shipped model used for a kind when the request names none: the first (by name) whose
@@ -84,8 +98,8 @@ impl FitRequest {
         limits: &Limits,
     ) -> Result<FitJob, ApiError> {
         let kind = Kind::parse(&self.kind).ok_or_else(|| {
-            ApiError::invalid(
-                "unknown_kind",
+            ApiError::new(
+                ErrorCode::UnknownKind,
                 format!(
                     "kind {:?} is not one of points2d, correspondences, trajectories",
                     self.kind
@@ -94,14 +108,14 @@ impl FitRequest {
         })?;
         let points = match (self.points, self.trajectory_matrix) {
             (Some(_), Some(_)) => {
-                return Err(ApiError::invalid(
-                    "invalid_request",
+                return Err(ApiError::new(
+                    ErrorCode::InvalidRequest,
                     "give either points or trajectory_matrix, not both",
                 ));
             }
             (None, None) => {
-                return Err(ApiError::invalid(
-                    "invalid_request",
+                return Err(ApiError::new(
+                    ErrorCode::InvalidRequest,
                     "points (or trajectory_matrix) is required",
                 ));
             }
@@ -111,8 +125,8 @@ impl FitRequest {
             }
             (None, Some(matrix)) => {
                 if kind != Kind::Trajectories {
-                    return Err(ApiError::invalid(
-                        "invalid_request",
+                    return Err(ApiError::new(
+                        ErrorCode::InvalidRequest,
                         "trajectory_matrix is only for kind trajectories",
                     ));
                 }
@@ -122,27 +136,31 @@ impl FitRequest {
         };
         let model = match &self.model {
             Some(name) => models.get(name).ok_or_else(|| {
-                ApiError::invalid(
-                    "unknown_model",
+                ApiError::new(
+                    ErrorCode::UnknownModel,
                     format!("no model named {name:?}; see GET /v1/models"),
                 )
             })?,
             None => default_model(models, kind).ok_or_else(|| {
-                ApiError::invalid("unknown_model", format!("no model serves kind {kind}"))
+                ApiError::new(
+                    ErrorCode::UnknownModel,
+                    format!("no model serves kind {kind}"),
+                )
             })?,
         };
         if model.card.kind != kind {
-            return Err(ApiError::invalid(
-                "model_mismatch",
+            return Err(ApiError::new(
+                ErrorCode::ModelMismatch,
                 format!(
                     "model {} takes {}, the request has kind {kind}",
                     model.card.name, model.card.kind
                 ),
             ));
         }
-        if points.dim() != model.card.input_dim {
-            return Err(ApiError::invalid(
-                "model_mismatch",
+        // Trajectory models read tracks of any length (the fit pipeline resamples them).
+        if points.dim() != model.card.input_dim && kind != Kind::Trajectories {
+            return Err(ApiError::new(
+                ErrorCode::ModelMismatch,
                 format!(
                     "model {} takes rows of {} values, got {}",
                     model.card.name,
@@ -158,16 +176,16 @@ impl FitRequest {
         let n = points.len();
         let k_max = self.k_max.unwrap_or(model.card.k_max);
         if k_max == 0 || k_max > limits.max_k_max {
-            return Err(ApiError::invalid(
-                "invalid_k",
+            return Err(ApiError::new(
+                ErrorCode::InvalidK,
                 format!("k_max must be between 1 and {}", limits.max_k_max),
             ));
         }
         let selection = match (self.k, self.selection.as_deref()) {
             (Some(k), _) => {
                 if k == 0 || k > n {
-                    return Err(ApiError::invalid(
-                        "invalid_k",
+                    return Err(ApiError::new(
+                        ErrorCode::InvalidK,
                         format!("k = {k} must be between 1 and the number of points ({n})"),
                     ));
                 }
@@ -177,10 +195,39 @@ impl FitRequest {
             (None, Some("sod")) => Selection::Sod,
             (None, Some("silhouette")) => Selection::Silhouette,
             (None, Some(other)) => {
-                return Err(ApiError::invalid(
-                    "invalid_selection",
+                return Err(ApiError::new(
+                    ErrorCode::InvalidSelection,
                     format!("selection {other:?} is not sod or silhouette"),
                 ));
+            }
+        };
+        let refine = match (self.refine.unwrap_or(model.card.refine), self.outliers, self.outlier_threshold) {
+            (false, None, None) => None,
+            (false, _, _) => {
+                return Err(ApiError::new(
+                    ErrorCode::InvalidRequest,
+                    "outliers and outlier_threshold need refine",
+                ));
+            }
+            (true, outliers, threshold) => {
+                if let Some(t) = threshold
+                    && !(t.is_finite() && t > 0.0)
+                {
+                    return Err(ApiError::new(
+                        ErrorCode::InvalidRequest,
+                        format!("outlier_threshold {t} must be a positive number"),
+                    ));
+                }
+                if threshold.is_some() && outliers == Some(false) {
+                    return Err(ApiError::new(
+                        ErrorCode::InvalidRequest,
+                        "outlier_threshold needs outliers: true",
+                    ));
+                }
+                Some(RefineParams {
+                    outliers: outliers.unwrap_or(threshold.is_some() || model.card.outliers),
+                    threshold,
+                })
             }
         };
         let params = ClusterParams::builder()
@@ -195,14 +242,15 @@ impl FitRequest {
             params,
             return_embeddings: self.return_embeddings.unwrap_or(false),
             test_symmetries: self.test_symmetries.unwrap_or(true),
+            refine,
         })
     }
 }
 
 fn check_size(n: usize, width: usize, limits: &Limits) -> Result<(), ApiError> {
     if n > limits.max_points {
-        return Err(ApiError::invalid(
-            "too_many_points",
+        return Err(ApiError::new(
+            ErrorCode::TooManyPoints,
             format!(
                 "{n} points; this server takes at most {}",
                 limits.max_points
@@ -210,8 +258,8 @@ fn check_size(n: usize, width: usize, limits: &Limits) -> Result<(), ApiError> {
         ));
     }
     if width > 2 * limits.max_frames {
-        return Err(ApiError::invalid(
-            "too_many_frames",
+        return Err(ApiError::new(
+            ErrorCode::TooManyFrames,
             format!(
                 "rows of {width} values; this server takes at most {} frames",
                 limits.max_frames
@@ -246,19 +294,39 @@ pub struct KScore {
 pub struct Timing {
     pub embed: f64,
     pub cluster: f64,
+    pub refine: f64,
     pub total: f64,
+}
+
+/// One fitted structure: its label, model type and parameters (caller's units), how many
+/// points carry its label and their RMS residual.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct StructureOut {
+    pub label: usize,
+    #[serde(flatten)]
+    pub model: Model,
+    pub inliers: usize,
+    pub rms: f64,
 }
 
 /// `POST /v1/fit` answer.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct FitResponse {
     pub model: ModelRef,
-    pub labels: Vec<usize>,
+    /// One per point: its structure, or -1 for an outlier (refinement only).
+    pub labels: Vec<i64>,
+    /// Structures, not counting outliers.
     pub k: usize,
     pub selection: String,
     pub residuals: Vec<Residual>,
     pub scores: Vec<KScore>,
     pub cluster_sizes: Vec<usize>,
+    /// One per label 0..k with refinement; empty without.
+    pub structures: Vec<StructureOut>,
+    /// Points labelled -1.
+    pub outliers: usize,
+    /// Quantities of the input outside the range the model was validated on.
+    pub warnings: Vec<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub embeddings: Option<Vec<Vec<f32>>>,
     pub timing_ms: Timing,
@@ -267,20 +335,26 @@ pub struct FitResponse {
 impl FitResponse {
     pub fn new(job: &FitJob, outcome: FitOutcome, total_ms: f64) -> Self {
         let Clustering {
-            labels,
-            k,
             selection,
             residuals,
             scores,
-            cluster_sizes,
+            ..
         } = outcome.clustering;
+        let k = outcome.k;
+        let mut cluster_sizes = vec![0; k];
+        for &l in &outcome.labels {
+            if let Ok(l) = usize::try_from(l) {
+                cluster_sizes[l] += 1;
+            }
+        }
         Self {
             model: ModelRef {
                 name: job.model.card.name.clone(),
                 version: job.model.card.version.clone(),
                 weights_sha256: job.model.weights_sha256().map(str::to_string),
             },
-            labels,
+            outliers: outcome.labels.iter().filter(|&&l| l < 0).count(),
+            labels: outcome.labels,
             k,
             selection: selection.name().to_string(),
             residuals: residuals
@@ -292,6 +366,17 @@ impl FitResponse {
                 .map(|(k, score)| KScore { k, score })
                 .collect(),
             cluster_sizes,
+            structures: outcome
+                .structures
+                .into_iter()
+                .map(|s| StructureOut {
+                    label: s.label,
+                    model: s.model,
+                    inliers: s.inliers,
+                    rms: s.rms,
+                })
+                .collect(),
+            warnings: outcome.warnings,
             embeddings: job.return_embeddings.then(|| {
                 outcome
                     .embeddings
@@ -302,6 +387,7 @@ impl FitResponse {
             timing_ms: Timing {
                 embed: outcome.embed_ms,
                 cluster: outcome.cluster_ms,
+                refine: outcome.refine_ms,
                 total: total_ms,
             },
         }

@@ -26,7 +26,7 @@ struct Args {
     #[arg(long, env = "MULTIFIT_MAX_POINTS", default_value_t = 20_000)]
     max_points: usize,
     /// Most frames per trajectory.
-    #[arg(long, env = "MULTIFIT_MAX_FRAMES", default_value_t = 50)]
+    #[arg(long, env = "MULTIFIT_MAX_FRAMES", default_value_t = 500)]
     max_frames: usize,
     /// Largest k_max a request may ask for.
     #[arg(long, env = "MULTIFIT_MAX_K_MAX", default_value_t = 20)]

@@ -8,14 +8,16 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
-use multifit::data::synthetic::{LceConfig, LceSpec, LceVariant};
+use multifit::data::synthetic::{LceConfig, LceSpec, LceVariant, parse_range};
 use multifit::data::{DataSource, Kind, Normalization, Sample, Sequence, Symmetry};
 use multifit::loss::Loss;
 use multifit::model::ModelConfig;
 use multifit::registry::{
-    LoadedModel, MetricRecord, ModelCard, TrainingInfo, WEIGHTS_FILE, write_ensemble,
+    LoadedModel, MetricRecord, ModelCard, TrainingInfo, WEIGHTS_FILE, card_for, write_ensemble,
 };
 use multifit::train::cv::{self, CvSpec, Protocol, SamplePlan};
+use multifit::data::frames::FrameSampling;
+use multifit::refine::RefineParams;
 use multifit::train::eval::{EvalSettings, evaluate_sample, format_table, totals};
 use multifit::train::{EpochLog, Hooks, Schedule, TrainConfig, prepare, train};
 
@@ -41,6 +43,48 @@ enum Command {
     Cv(CvCmd),
     /// Combine trained models into one that clusters all their embeddings side by side.
     Ensemble(EnsembleCmd),
+    /// The robustness grid: a model evaluated on inputs that drift from its training data
+    /// (density, scale, structure mix, arcs, outliers, similarity; subsampling, rescaling;
+    /// frame strides), written as a Markdown table and JSON.
+    Robustness(RobustnessCmd),
+}
+
+#[derive(Args, Debug)]
+struct RobustnessCmd {
+    /// Model directory.
+    #[arg(long)]
+    model: PathBuf,
+    /// Output directory (robustness.md, robustness.json).
+    #[arg(long)]
+    out: PathBuf,
+    /// Generated samples per points2d cell (the paper-protocol cell keeps its 200).
+    #[arg(long, default_value_t = multifit::train::robustness::GridSettings::DEFAULT_SETS)]
+    sets: usize,
+    /// Seeded draws per sequence in the random real-data cells (subsampling, added outliers).
+    #[arg(long, default_value_t = 3)]
+    draws: usize,
+    /// Seed of the generated data and of the draws.
+    #[arg(long, default_value_t = multifit::train::robustness::GridSettings::DEFAULT_SEED)]
+    seed: u64,
+    #[arg(long, default_value_t = 4)]
+    restarts: usize,
+    /// Largest K for automatic selection (default: the card's).
+    #[arg(long)]
+    k_max: Option<usize>,
+    /// Run only these cells (comma-separated names; default: all).
+    #[arg(long, value_delimiter = ',')]
+    cells: Vec<String>,
+    /// Dataset directory for correspondence and trajectory models (default:
+    /// ../shared/datasets/adelaidermf or ../shared/datasets/kt3dmoseg).
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// AdelaideRMF model type (homography or fundamental; default: from the model's name).
+    #[arg(long)]
+    model_type: Option<String>,
+    /// Score each real sequence with its leave-one-out fold model, <FOLDS>/models/<sequence>/
+    /// (a `cv --out` directory), instead of the shipped model.
+    #[arg(long)]
+    folds: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]
@@ -66,26 +110,40 @@ struct GenLceArgs {
     count: usize,
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// mixed (line, 2 ellipses, circle) or unmixed (2-4 of one type).
+    /// mixed (line, 2 ellipses, circle), unmixed (2-4 of one type) or random (2-6 of random
+    /// types).
     #[arg(long, value_enum, default_value = "mixed")]
     variant: LceVariant,
-    #[arg(long, default_value_t = 50)]
-    points_per_shape: usize,
+    /// Points per structure: N, or MIN-MAX to draw each structure's count in that range.
+    #[arg(long, default_value = "50")]
+    points_per_shape: String,
     /// Gaussian noise sigma on the unit-scale frame.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true)]
     noise: f64,
     /// Multiplies every shape length but not the noise (2 = half the relative noise).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     scale: f64,
+    /// Circles and ellipses as partial arcs: span in degrees, MIN-MAX (or one value), within
+    /// (0, 360] (default: whole shapes).
+    #[arg(long)]
+    arc: Option<String>,
+    /// Gross outliers as a share of the inliers, in [0, 1): uniform over the bounding box,
+    /// label 0.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    outliers: f64,
+    /// Apply a random similarity (rotation, scale, translation) to every sample.
+    #[arg(long)]
+    similarity: bool,
 }
 
 /// Data selection shared by train, eval and cv.
 #[derive(Args, Debug, Clone)]
 struct DataArgs {
     /// Dataset directory or file, or LCE samples generated in memory:
-    /// lce:<mixed|unmixed>[,count=N][,seed=S][,scale=X][,noise=X][,points=N] (what gen-lce would
-    /// write with the same settings; defaults 200 samples, seed 0, scale 1, noise 0.05, 50 points
-    /// per shape). Repeatable.
+    /// lce:<mixed|unmixed|random>[,count=N][,seed=S][,scale=X][,noise=X][,points=N|MIN-MAX]
+    /// [,arc=MIN-MAX][,outliers=R][,similarity=true] (what gen-lce would write with the same
+    /// settings; defaults 200 samples, seed 0, scale 1, noise 0.05, 50 points per shape, whole
+    /// shapes, no outliers, no similarity). Repeatable.
     #[arg(long, required = true)]
     data: Vec<DataSource>,
     /// Keep only AdelaideRMF sequences of this model type (homography or fundamental).
@@ -218,6 +276,51 @@ struct EvalCmd {
     /// reverse, rotate; the flag alone: none).
     #[arg(long, value_enum, value_delimiter = ',', num_args = 0..)]
     test_symmetry: Option<Vec<Symmetry>>,
+    /// Score the geometric refinement (outliers as one group) or the clustering alone; default:
+    /// the card's.
+    #[arg(long, value_enum)]
+    refine: Option<Switch>,
+    /// With refinement: whether points may be labelled outliers (−1); default: the card's.
+    #[arg(long, value_enum)]
+    outliers: Option<Switch>,
+    /// Trajectories: frames per test clip (a number >= 2, or `all`: every frame of the sequence,
+    /// on the tracks visible throughout); default: the model's.
+    #[arg(long)]
+    frames: Option<FrameCount>,
+    /// Trajectories: take every `stride`-th frame for the test clip (faster apparent motion).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    stride: u64,
+    /// Trajectories: which frames of a clip of another length the network reads, instead of the
+    /// card's.
+    #[arg(long, value_enum)]
+    frame_sampling: Option<FrameSampling>,
+}
+
+/// On or off.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Switch {
+    On,
+    Off,
+}
+
+/// A number of frames, or every frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum FrameCount {
+    N(usize),
+    All,
+}
+
+impl std::str::FromStr for FrameCount {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "all" => Ok(FrameCount::All),
+            _ => match s.parse::<usize>() {
+                Ok(n) if n >= 2 => Ok(FrameCount::N(n)),
+                _ => Err(format!("{s:?} is not `all` or a number of frames >= 2")),
+            },
+        }
+    }
 }
 
 #[derive(Args, Debug)]
@@ -344,17 +447,40 @@ fn progress(len: u64) -> ProgressBar {
 }
 
 fn gen_lce(a: GenLceArgs) -> Result<()> {
+    let (points_per_shape, points_max) = parse_range::<usize>(&a.points_per_shape)
+        .map_err(|e| anyhow::anyhow!("--points-per-shape {}: {e}", a.points_per_shape))?;
+    let arc = match &a.arc {
+        Some(text) => {
+            let (lo, hi) =
+                parse_range::<f64>(text).map_err(|e| anyhow::anyhow!("--arc {text}: {e}"))?;
+            Some([lo, hi.unwrap_or(lo)])
+        }
+        None => None,
+    };
     let spec = LceSpec {
         variant: a.variant,
         count: a.count,
         seed: a.seed,
         config: LceConfig {
-            points_per_shape: a.points_per_shape,
+            points_per_shape,
             noise: a.noise,
             scale: a.scale,
+            points_max,
+            arc,
+            outliers: a.outliers,
+            similarity: a.similarity,
         },
     };
-    spec.validate().map_err(anyhow::Error::msg)?;
+    spec.config
+        .validate()
+        .map_err(|e| anyhow::anyhow!(e.for_flag()))?;
+    if spec.validate().is_err() {
+        bail!(
+            "--count {}: count must be 1 to {}",
+            a.count,
+            LceSpec::MAX_COUNT
+        );
+    }
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("{}: cannot create", a.out.display()))?;
     for file in spec.files() {
@@ -492,7 +618,7 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
         seconds: outcome.seconds,
         machine: machine(),
     };
-    let mut card = cv::card_for(&a.name, kind, &config, a.train.k_max, info);
+    let mut card = card_for(&a.name, kind, &config.model, config.loss, a.train.k_max, info);
     card.test_symmetries = a.train.test_symmetry.clone();
     card.git_commit = git_commit();
     if let Some(v) = outcome.best_val_error {
@@ -545,10 +671,22 @@ fn init_card(dir: &Path, config: &TrainConfig) -> Result<(PathBuf, ModelCard)> {
     Ok((dir.join(WEIGHTS_FILE), card))
 }
 
-fn eval_samples(seqs: &[Sequence], input_dim: usize) -> Vec<Sample> {
+/// The test sample of every sequence: trajectories cut to the first `frames` frames taken every
+/// `stride`-th (all of them: as many as the sequence has).
+fn eval_samples(seqs: &[Sequence], frames: FrameCount, stride: usize) -> Vec<Sample> {
     seqs.iter()
         .filter_map(|s| match s.points.kind() {
-            Kind::Trajectories if s.points.dim() != input_dim => s.clip(0, input_dim / 2),
+            Kind::Trajectories => {
+                let len = match frames {
+                    FrameCount::N(n) => n,
+                    FrameCount::All => (s.frames() - 1) / stride + 1,
+                };
+                if len == s.frames() && stride == 1 && s.visible.is_none() {
+                    Some(s.sample())
+                } else {
+                    s.clip_every(0, len, stride)
+                }
+            }
             _ => Some(s.sample()),
         })
         .collect()
@@ -566,11 +704,26 @@ fn eval_cmd(a: EvalCmd) -> Result<()> {
         model.card.test_symmetries = list;
     }
     let seqs = a.data.sequences()?;
-    let samples = eval_samples(&seqs, model.card.input_dim);
+    if let Some(sampling) = a.frame_sampling {
+        model.card.frames = sampling;
+    }
+    let frames = a.frames.unwrap_or(FrameCount::N(model.card.input_dim / 2));
+    let samples = eval_samples(&seqs, frames, a.stride as usize);
+    if samples.is_empty() {
+        bail!("no sequence has a test clip of {frames:?} frames at stride {}", a.stride);
+    }
+    let refine = a.refine.map_or(model.card.refine, |r| r == Switch::On);
+    if a.record.is_some() && (refine != model.card.refine || a.frames.is_some() || a.stride != 1) {
+        bail!("--record stores a metric of the model as served: drop --refine, --frames and --stride");
+    }
     let settings = EvalSettings {
         k_max: a.k_max,
         restarts: a.restarts,
         seed: a.seed,
+        refine: refine.then(|| RefineParams {
+            outliers: a.outliers.map_or(model.card.outliers, |o| o == Switch::On),
+            threshold: None,
+        }),
     };
     let mut rows = Vec::new();
     for s in &samples {
@@ -619,6 +772,43 @@ fn eval_cmd(a: EvalCmd) -> Result<()> {
     Ok(())
 }
 
+fn robustness_cmd(a: RobustnessCmd) -> Result<()> {
+    use multifit::train::robustness::{self, GridSettings};
+    let settings = GridSettings {
+        sets: a.sets,
+        draws: a.draws,
+        seed: a.seed,
+        restarts: a.restarts,
+        k_max: a.k_max,
+        cells: a.cells,
+        data: a.data,
+        model_type: a.model_type,
+    };
+    let mut on_cell = |c: &robustness::CellResult| {
+        eprintln!(
+            "{:<16} {:>4} samples  known K {:>6.2} / {:>6.2} %  chosen K {:>6.2} % ({:>5.1} % K right)  {:>5.0} s",
+            c.name,
+            c.samples,
+            100.0 * c.known.mean_error,
+            100.0 * c.known.median_error,
+            100.0 * c.chosen.mean_error,
+            100.0 * c.chosen.k_correct,
+            c.seconds
+        );
+    };
+    let mut report = robustness::run(&a.model, a.folds.as_deref(), &settings, &mut on_cell)?;
+    report.command = command_line();
+    robustness::write(&report, &a.out)
+        .with_context(|| format!("{}: cannot write the report", a.out.display()))?;
+    println!(
+        "wrote {} and robustness.json ({} cells, {:.0} s)",
+        a.out.join("robustness.md").display(),
+        report.cells.len(),
+        report.seconds
+    );
+    Ok(())
+}
+
 fn ensemble_cmd(a: EnsembleCmd) -> Result<()> {
     let name = match a.name {
         Some(n) => n,
@@ -656,6 +846,7 @@ fn cv_cmd(a: CvCmd) -> Result<()> {
             k_max: a.train.k_max,
             restarts: a.restarts,
             seed: 0,
+            refine: None,
         },
         out: a.out.clone(),
     };
@@ -770,6 +961,7 @@ fn main() -> ExitCode {
         Command::Eval(a) => eval_cmd(a),
         Command::Cv(a) => cv_cmd(a),
         Command::Ensemble(a) => ensemble_cmd(a),
+        Command::Robustness(a) => robustness_cmd(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

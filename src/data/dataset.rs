@@ -152,28 +152,41 @@ impl Sequence {
     /// frames, their `2 * len` values, labels renumbered. `None` when the frames do not exist or
     /// fewer than two points are visible throughout.
     pub fn clip(&self, start: usize, len: usize) -> Option<Sample> {
-        if self.points.kind() != Kind::Trajectories || len < 2 || start + len > self.frames() {
+        self.clip_every(start, len, 1)
+    }
+
+    /// Frames `start, start + step, ..., start + (len - 1) step` of a trajectory sequence (a
+    /// clip at a frame stride: faster apparent motion), as [`Sequence::clip`] takes them.
+    pub fn clip_every(&self, start: usize, len: usize, step: usize) -> Option<Sample> {
+        let step = step.max(1);
+        let end = start + (len.max(1) - 1) * step;
+        if self.points.kind() != Kind::Trajectories || len < 2 || end >= self.frames() {
             return None;
         }
+        let frames: Vec<usize> = (0..len).map(|f| start + f * step).collect();
         let rows: Vec<usize> = (0..self.points.len())
             .filter(|&i| match &self.visible {
-                Some(vis) => vis[i][start..start + len].iter().all(|&v| v == 1),
+                Some(vis) => frames.iter().all(|&f| vis[i][f] == 1),
                 None => true,
             })
             .collect();
         let values: Vec<f64> = rows
             .iter()
             .flat_map(|&i| {
-                self.points.row(i)[2 * start..2 * (start + len)]
-                    .iter()
-                    .copied()
+                let row = self.points.row(i);
+                frames.iter().flat_map(move |&f| [row[2 * f], row[2 * f + 1]])
             })
             .collect();
         let points = PointSet::from_flat(Kind::Trajectories, 2 * len, values).ok()?;
         let raw: Vec<i64> = rows.iter().map(|&i| self.labels[i]).collect();
         let (labels, k) = renumber(&raw);
+        let name = if step == 1 {
+            format!("{}[{}..{}]", self.name, start + 1, end + 1)
+        } else {
+            format!("{}[{}..{} every {step}]", self.name, start + 1, end + 1)
+        };
         Some(Sample {
-            name: format!("{}[{}..{}]", self.name, start + 1, start + len),
+            name,
             points,
             labels,
             k,

@@ -15,7 +15,7 @@
 /// best distance found. Exact (a squared distance is at least its first term, in floating point
 /// too), and for 2D sets about sqrt(n) times less work than comparing all pairs (20000 points:
 /// seconds to milliseconds).
-fn nearest_all(points: &[f32], stride: usize, dim: usize, k: usize) -> Vec<usize> {
+pub(crate) fn nearest_all(points: &[f32], stride: usize, dim: usize, k: usize) -> Vec<usize> {
     use std::collections::BinaryHeap;
     let n = points.len() / stride;
     let take = k.min(n.saturating_sub(1));

@@ -1,7 +1,9 @@
 //! Inputs: validated point sets, normalisation, labelled datasets and synthetic generators.
 
 pub mod dataset;
+pub mod density;
 pub mod features;
+pub mod frames;
 pub mod points;
 pub mod symmetry;
 pub mod synthetic;

@@ -1,7 +1,8 @@
 //! Single-precision matrix multiply for the serving forward pass: ndarray's safe
 //! `general_mat_mul`, which runs matrixmultiply's sgemm kernels on the calling thread (the
-//! forward pass splits rows across threads itself). Measured here at N = 1000, 128 x 128 on one
-//! core: about 165 GFLOP/s, against about 115 for the `gemm` crate that burn-flex uses.
+//! forward pass splits rows across threads itself). At N = 1000, 128 x 128 on one AVX-512 core
+//! (`cargo bench --bench core`): about 165 GFLOP/s, against about 115 for the `gemm` crate that
+//! burn-flex uses.
 
 use ndarray::linalg::general_mat_mul;
 use ndarray::{ArrayView2, ArrayViewMut2};

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 use super::eval::{EvalRow, EvalSettings, evaluate_sample};
 use super::{Hooks, TrainConfig, TrainError, checkpoint_err, prepare, train};
 use crate::data::{Kind, Normalization, Sample, Sequence, Symmetry, with_symmetries};
-use crate::registry::{LoadedModel, ModelCard, TrainingInfo, WEIGHTS_FILE};
+use crate::registry::{LoadedModel, TrainingInfo, WEIGHTS_FILE, card_for};
 
 /// Which training clips a fold uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
@@ -138,32 +138,6 @@ pub fn finished_fold(out: &Path, name: &str) -> Option<FoldResult> {
     serde_json::from_str(&text).ok()
 }
 
-/// A model card for a network trained in this process (used for folds and `train`).
-pub fn card_for(
-    name: &str,
-    kind: Kind,
-    config: &TrainConfig,
-    k_max: usize,
-    training: TrainingInfo,
-) -> ModelCard {
-    ModelCard {
-        name: name.to_string(),
-        version: "1".into(),
-        kind,
-        input_dim: config.model.input_dim,
-        normalization: Normalization::for_kind(kind),
-        architecture: config.model.clone(),
-        loss: config.loss,
-        k_max,
-        selection: crate::cluster::Selection::Sod,
-        training,
-        test_symmetries: vec![],
-        members: vec![],
-        metrics: vec![],
-        multifit_version: env!("CARGO_PKG_VERSION").into(),
-        git_commit: None,
-    }
-}
 
 /// Trains on every sequence but `held_out` and evaluates on `held_out`'s test sample.
 /// Writes the result to `<out>/folds/<name>.json`; returns the saved result when it exists.
@@ -212,7 +186,8 @@ pub fn run_fold(
     let mut card = card_for(
         &format!("fold-{name}"),
         kind,
-        &spec.train,
+        &spec.train.model,
+        spec.train.loss,
         spec.eval.k_max,
         info,
     );
@@ -252,7 +227,7 @@ pub fn run_fold(
 }
 
 /// Runs `exe <args> --fold <name>` for every unfinished fold, at most `jobs` at a time, each child
-/// limited to one compute thread (two one-thread processes train faster here than one
+/// limited to one compute thread (on two cores, two one-thread processes train faster than one
 /// two-thread process). Returns the names of folds whose process failed.
 pub fn run_in_processes(
     exe: &Path,

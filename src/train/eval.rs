@@ -6,7 +6,9 @@ use serde::{Deserialize, Serialize};
 use crate::cluster::{ClusterParams, Clustering, Selection};
 use crate::data::Sample;
 use crate::metrics::{error_rate, mean_median, model_selection_rate, nmi};
-use crate::registry::{FitError, LoadedModel};
+use crate::pipeline::{self, Embedding, FitError};
+use crate::refine::RefineParams;
+use crate::registry::LoadedModel;
 
 /// The score of one labelling.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -62,13 +64,15 @@ pub struct EvalSettings {
     pub k_max: usize,
     pub restarts: usize,
     pub seed: u64,
+    /// Geometric refinement after every clustering, or `None` to score the clustering alone.
+    pub refine: Option<RefineParams>,
 }
 
 /// Scores one clustering of the sample's embeddings, K chosen by `selection`.
 fn score(
     sample: &Sample,
     model: &LoadedModel,
-    embeddings: (&[f32], usize),
+    embedding: &Embedding,
     selection: Selection,
     s: &EvalSettings,
 ) -> Result<(Score, Clustering), FitError> {
@@ -78,13 +82,35 @@ fn score(
         .restarts(s.restarts)
         .seed(s.seed)
         .build()?;
-    let clustering = model.cluster(embeddings.0, embeddings.1, &params)?;
-    let score = Score {
-        k: clustering.k,
-        error: error_rate(&sample.labels, &clustering.labels),
-        nmi: nmi(&sample.labels, &clustering.labels),
+    let clustering = pipeline::cluster(model, embedding, &params)?;
+    let score = match &s.refine {
+        None => Score {
+            k: clustering.k,
+            error: error_rate(&sample.labels, &clustering.labels),
+            nmi: nmi(&sample.labels, &clustering.labels),
+        },
+        Some(r) => {
+            let refined = pipeline::refine(model, &sample.points, &clustering, r);
+            let (labels, k) = outliers_as_group(&refined.labels, refined.structures.len());
+            Score {
+                k,
+                error: error_rate(&sample.labels, &labels),
+                nmi: nmi(&sample.labels, &labels),
+            }
+        }
     };
     Ok((score, clustering))
+}
+
+/// Refined labels scored as a sample's are: the outliers (−1) as one more group, labelled k, as
+/// a dataset's outlier label is one group of its own. -> (labels, groups including the outliers').
+pub fn outliers_as_group(labels: &[i64], k: usize) -> (Vec<usize>, usize) {
+    let any = labels.iter().any(|&l| l < 0);
+    let labels = labels
+        .iter()
+        .map(|&l| usize::try_from(l).unwrap_or(k))
+        .collect();
+    (labels, k + usize::from(any))
 }
 
 /// Evaluates one sample with known K, SOD and silhouette. The sample is embedded once (with the
@@ -96,20 +122,22 @@ pub fn evaluate_sample(
     sample: &Sample,
     s: &EvalSettings,
 ) -> Result<EvalRow, FitError> {
-    let (z, e) = model.fit_embeddings(
+    let z = pipeline::embed(
+        model,
         &sample.points,
         sample.image_size,
         &model.card.test_symmetries,
+        s.seed,
     )?;
     let by_k = (1..=s.k_max.min(sample.points.len()))
-        .map(|k| Ok(score(sample, model, (&z, e), Selection::Fixed(k), s)?.0))
+        .map(|k| Ok(score(sample, model, &z, Selection::Fixed(k), s)?.0))
         .collect::<Result<Vec<Score>, FitError>>()?;
     let known = match sample.k.checked_sub(1).and_then(|i| by_k.get(i)) {
         Some(&known) => known,
-        None => score(sample, model, (&z, e), Selection::Fixed(sample.k), s)?.0,
+        None => score(sample, model, &z, Selection::Fixed(sample.k), s)?.0,
     };
-    let (sod, curve) = score(sample, model, (&z, e), Selection::Sod, s)?;
-    let (silhouette, _) = score(sample, model, (&z, e), Selection::Silhouette, s)?;
+    let (sod, curve) = score(sample, model, &z, Selection::Sod, s)?;
+    let (silhouette, _) = score(sample, model, &z, Selection::Silhouette, s)?;
     let errors_by_k = by_k.iter().map(|score| score.error).collect();
     Ok(EvalRow {
         name: sample.name.clone(),
@@ -240,6 +268,7 @@ mod tests {
             k_max: 5,
             restarts: 2,
             seed: 4,
+            refine: None,
         };
         let row = evaluate_sample(&model, &sample, &s).unwrap();
         let fit = |selection| {

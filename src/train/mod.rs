@@ -6,6 +6,7 @@
 
 pub mod cv;
 pub mod eval;
+pub mod robustness;
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -20,7 +21,7 @@ use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
 use crate::cluster::{ClusterParams, Points, Selection, cluster};
-use crate::data::features::with_neighbors;
+use crate::pipeline::network_input;
 use crate::data::{Normalization, Sample};
 use crate::loss::{Loss, one_hot};
 use crate::metrics::error_rate;
@@ -131,11 +132,7 @@ pub fn prepare(
         .iter()
         .map(|s| Prepared {
             name: s.name.clone(),
-            input: with_neighbors(
-                &normalization.apply(&s.points, s.image_size),
-                s.points.dim(),
-                neighbors,
-            ),
+            input: network_input(normalization, &s.points, s.image_size, neighbors),
             dim: s.points.dim() * (1 + neighbors),
             labels: s.labels.clone(),
             k: s.k,
@@ -474,6 +471,7 @@ mod tests {
             points_per_shape: 16,
             noise: 0.01,
             scale: 1.0,
+            ..LceConfig::default()
         };
         let mut g = LceGenerator::new(seed, cfg);
         let samples: Vec<Sample> = (0..count)
@@ -536,8 +534,12 @@ mod tests {
     #[test]
     fn stop_flag_interrupts_and_resume_continues() {
         let train_set = two_lines(4, 4);
-        let dir = std::env::temp_dir().join(format!("multifit-resume-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let tmp = tempfile::Builder::new()
+            .prefix("multifit-resume-")
+            .tempdir()
+            .unwrap();
+        // A directory that does not exist yet: the first run creates it.
+        let dir = tmp.path().join("checkpoint");
         let cfg = tiny_config(Loss::L2);
         let stop = AtomicBool::new(false);
         let mut seen = 0;
@@ -575,15 +577,16 @@ mod tests {
             train(&other, &train_set, &[], hooks),
             Err(TrainError::Checkpoint { .. })
         ));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
     fn init_starts_from_given_weights_and_rejects_other_shapes() {
         let train_set = two_lines(4, 6);
-        let dir = std::env::temp_dir().join(format!("multifit-init-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let weights = dir.join("w.safetensors");
+        let dir = tempfile::Builder::new()
+            .prefix("multifit-init-")
+            .tempdir()
+            .unwrap();
+        let weights = dir.path().join("w.safetensors");
         let cfg = tiny_config(Loss::L2);
         let first = train(&cfg, &train_set, &[], Hooks::default()).unwrap();
         first.net.save(&weights).unwrap();
@@ -631,7 +634,6 @@ mod tests {
             train(&wider, &train_set, &[], hooks),
             Err(TrainError::Model(_))
         ));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

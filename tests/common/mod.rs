@@ -187,6 +187,25 @@ pub fn send(
     content_type: Option<&str>,
     body: Vec<u8>,
 ) -> Result<Response, String> {
+    let headers: Vec<(&str, &str)> = content_type
+        .map(|ct| ("content-type", ct))
+        .into_iter()
+        .collect();
+    send_with(addr, method, path, &headers, body)
+}
+
+/// One HTTP/1.1 request with the given headers over a fresh connection.
+pub fn send_with(
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: Vec<u8>,
+) -> Result<Response, String> {
+    let headers: Vec<(String, String)> = headers
+        .iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect();
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -203,8 +222,8 @@ pub fn send(
             .method(method)
             .uri(path)
             .header("host", addr.to_string());
-        if let Some(ct) = content_type {
-            req = req.header("content-type", ct);
+        for (name, value) in &headers {
+            req = req.header(name.as_str(), value.as_str());
         }
         let req = req
             .body(Full::new(Bytes::from(body)))
@@ -300,13 +319,14 @@ pub fn embeddings(v: &Value) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// Labels of a fit answer.
+/// A fit answer's labels, outliers (-1) as one more group labelled k, as scoring counts them.
 pub fn labels(v: &Value) -> Vec<usize> {
+    let k = v["k"].as_u64().expect("k") as usize;
     v["labels"]
         .as_array()
         .expect("labels")
         .iter()
-        .map(|l| l.as_u64().unwrap() as usize)
+        .map(|l| usize::try_from(l.as_i64().expect("integer label")).unwrap_or(k))
         .collect()
 }
 

@@ -1,0 +1,112 @@
+//! Tracks of any length read at a model's frame count.
+//!
+//! A trajectory model reads F_m frames (`input_dim = 2 F_m`); a user's tracker gives F ≥ 2.
+//! Frame i of the F_m the network reads sits at time t_i on the input's frame axis:
+//!
+//! - [`FrameSampling::Spread`]: t_i = i (F − 1) / (F_m − 1), frames spread over the whole track
+//!   (the first and last frames always read): a long track's motion is seen whole, and at 30 fps a
+//!   hand-held camera's motion over 5 consecutive frames is too small to separate motions;
+//! - [`FrameSampling::First`]: t_i = i, the first F_m frames, as the model was trained (when
+//!   F ≥ F_m).
+//!
+//! A position at a fractional time is interpolated linearly between its two frames; a track of
+//! fewer than F_m frames is thus read at interpolated times between its real ones. Every track must
+//! be visible in every frame: requests carry no visibility mask, and a missing value cannot be
+//! sent (JSON has no NaN).
+
+use serde::{Deserialize, Serialize};
+
+use super::PointSet;
+
+/// Which frames of a longer (or shorter) track a model reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum FrameSampling {
+    /// F_m frames spread evenly from the first frame to the last.
+    #[default]
+    Spread,
+    /// The first F_m frames (interpolated when the track is shorter).
+    First,
+}
+
+impl FrameSampling {
+    /// Time of each of `target` frames on an axis of `frames` frames (both ≥ 2 for `Spread`).
+    pub fn times(self, frames: usize, target: usize) -> Vec<f64> {
+        match self {
+            FrameSampling::Spread if target > 1 => {
+                let step = (frames - 1) as f64 / (target - 1) as f64;
+                (0..target).map(|i| i as f64 * step).collect()
+            }
+            FrameSampling::Spread => vec![0.0],
+            FrameSampling::First if frames >= target => (0..target).map(|i| i as f64).collect(),
+            // Fewer frames than the model reads: spread them, as nothing else is there.
+            FrameSampling::First => FrameSampling::Spread.times(frames, target),
+        }
+    }
+}
+
+/// Tracks `[n, 2F]` -> `[n, 2 target]`, read at the times `sampling` gives; the input's width
+/// must be even (every trajectory [`PointSet`] is). The result is a trajectory set of the same
+/// kind and order.
+pub fn resample(points: &PointSet, target: usize, sampling: FrameSampling) -> PointSet {
+    let frames = points.dim() / 2;
+    let times = sampling.times(frames, target);
+    let mut values = Vec::with_capacity(points.len() * 2 * target);
+    for i in 0..points.len() {
+        let row = points.row(i);
+        for &t in &times {
+            let lo = (t.floor() as usize).min(frames - 1);
+            let hi = (lo + 1).min(frames - 1);
+            let w = t - lo as f64;
+            for c in 0..2 {
+                let (a, b) = (row[2 * lo + c], row[2 * hi + c]);
+                values.push(if w == 0.0 { a } else { a + w * (b - a) });
+            }
+        }
+    }
+    PointSet::from_flat(points.kind(), 2 * target, values)
+        .expect("interpolated finite coordinates stay within the accepted range")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::Kind;
+
+    /// Tracks whose frame f holds (100 i + f, -f).
+    fn tracks(n: usize, frames: usize) -> PointSet {
+        let values = (0..n)
+            .flat_map(|i| (0..frames).flat_map(move |f| [(100 * i + f) as f64, -(f as f64)]))
+            .collect();
+        PointSet::from_flat(Kind::Trajectories, 2 * frames, values).unwrap()
+    }
+
+    #[test]
+    fn spread_reads_the_first_and_last_frames_and_evenly_between() {
+        let p = resample(&tracks(2, 29), 5, FrameSampling::Spread);
+        assert_eq!(p.dim(), 10);
+        assert_eq!(p.row(1), &[100., 0., 107., -7., 114., -14., 121., -21., 128., -28.]);
+    }
+
+    #[test]
+    fn first_reads_the_first_frames() {
+        let p = resample(&tracks(2, 29), 5, FrameSampling::First);
+        assert_eq!(p.row(0), &[0., 0., 1., -1., 2., -2., 3., -3., 4., -4.]);
+    }
+
+    #[test]
+    fn short_tracks_are_read_at_interpolated_times() {
+        // Two frames read as five: times 0, 0.25, 0.5, 0.75, 1.
+        for sampling in [FrameSampling::Spread, FrameSampling::First] {
+            let p = resample(&tracks(2, 2), 5, sampling);
+            assert_eq!(p.row(0), &[0., 0., 0.25, -0.25, 0.5, -0.5, 0.75, -0.75, 1., -1.]);
+        }
+    }
+
+    #[test]
+    fn the_model_width_reads_every_frame_unchanged() {
+        let t = tracks(3, 5);
+        assert_eq!(resample(&t, 5, FrameSampling::Spread), t);
+        assert_eq!(resample(&t, 5, FrameSampling::First), t);
+    }
+}

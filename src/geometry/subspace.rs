@@ -1,0 +1,505 @@
+//! Trajectories under an affine camera: affine motion subspaces.
+//!
+//! A track of F frames is the 2F-vector x = [x₁, y₁, …, x_F, y_F]. Under an affine camera the
+//! tracks of one rigid motion satisfy x = m + M·X (X the 3-D point): they lie in an affine
+//! subspace of dimension ≤ 3 (a linear one of dimension ≤ 4); planar or degenerate motions give
+//! 1–2.
+//!
+//! **Fit.** The (weighted) mean m of the group's tracks, then the principal directions of the
+//! centred 2F × n block C: the eigenvectors of the scatter C·W·Cᵀ (2F × 2F) when n ≥ 2F, or,
+//! for few tracks, of the Gram matrix W^½·CᵀC·W^½ (n × n) mapped back by C·W^½·v/√λ. The basis is
+//! the top r unit eigenvectors (rows of length 2F, orthonormal).
+//!
+//! **Rank.** r ∈ [min(2, r_max), r_max], r_max = min(4, n − 2, 2F − 1), minimises the
+//! GRIC-like criterion (Torr 1998, with data dimension D = 2F and manifold dimension r)
+//! Σᵢ min(eᵢ(r)²/s², 2(D − r)) + ln(D)·r·n + ln(D·n)·(D + r(D − r)),
+//! eᵢ(r) the distance of track i to the rank-r subspace and s the per-coordinate noise estimated
+//! robustly from the rank-r_max residuals: s² = median eᵢ(r_max)² / median χ²(D − r_max). The
+//! rank is chosen on all tracks (capped at 3, a rigid motion's affine rank), the subspace of
+//! that rank is fitted robustly, and the rank is chosen again (up to 4) on its inliers alone:
+//! a foreign group inside the tracks must not buy itself a dimension.
+//!
+//! **Residual.** The distance of a track to the affine subspace divided by √F: the RMS over
+//! frames of the per-frame 2-D distance (pixels); with noise σ per coordinate it is ≈ √2·σ
+//! (as for a 2-D point off a point).
+
+use std::marker::PhantomData;
+
+use super::Model;
+use super::linalg::{median, sym_eigen, top_eigen};
+use super::robust::{Estimator, Robust, SIGMA_FLOOR, evaluate, fit_robust};
+
+/// Above this many coordinates (2F), the scatter's top directions come from orthogonal
+/// iteration ([`top_eigen`]) rather than a full eigen-decomposition.
+const FULL_EIGEN_MAX: usize = 16;
+/// Highest rank tried.
+pub const MAX_RANK: usize = 4;
+/// The affine rank of one rigid motion under an affine camera: the rank of the robust fit
+/// before the inliers may raise it.
+pub const RIGID_RANK: usize = 3;
+
+/// An affine subspace: mean and orthonormal basis rows (length 2F each).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SubspaceParams {
+    pub mean: Vec<f64>,
+    pub basis: Vec<Vec<f64>>,
+}
+
+/// Distance of `row` to the affine subspace (mean, basis), divided by √F (F = len / 2);
+/// INFINITY when the lengths disagree.
+pub fn subspace_distance(mean: &[f64], basis: &[Vec<f64>], row: &[f64]) -> f64 {
+    let d = mean.len();
+    if row.len() != d || d < 2 || basis.iter().any(|b| b.len() != d) {
+        return f64::INFINITY;
+    }
+    let mut c: Vec<f64> = row.iter().zip(mean).map(|(x, m)| x - m).collect();
+    for b in basis {
+        let proj: f64 = c.iter().zip(b).map(|(x, y)| x * y).sum();
+        for (ci, bi) in c.iter_mut().zip(b) {
+            *ci -= proj * bi;
+        }
+    }
+    let e2: f64 = c.iter().map(|v| v * v).sum();
+    (e2 / (d / 2) as f64).sqrt()
+}
+
+/// (mean, basis rows, eigenvalues descending) of [`principal`].
+type Principal = (Vec<f64>, Vec<Vec<f64>>, Vec<f64>);
+
+/// The weighted mean, the top `max_rank` principal directions (unit, orthogonal) and the
+/// largest eigenvalues of the weighted scatter, descending (all of them for small blocks, the
+/// top `max_rank` for large ones).
+/// `Err` when the weighted tracks all coincide.
+fn principal(tracks: &[&[f64]], weights: &[f64], max_rank: usize) -> Result<Principal, String> {
+    let d = tracks.first().map_or(0, |t| t.len());
+    let active: Vec<usize> = (0..tracks.len()).filter(|&i| weights[i] > 0.0).collect();
+    let sw: f64 = active.iter().map(|&i| weights[i]).sum();
+    if active.is_empty() || !(sw > 0.0) {
+        return Err("no trajectories with weight".into());
+    }
+    let mut mean = vec![0.0; d];
+    for &i in &active {
+        for (m, x) in mean.iter_mut().zip(tracks[i]) {
+            *m += weights[i] * x;
+        }
+    }
+    mean.iter_mut().for_each(|m| *m /= sw);
+    // Centred, √w-scaled tracks.
+    let centred: Vec<Vec<f64>> = active
+        .iter()
+        .map(|&i| {
+            let s = weights[i].sqrt();
+            tracks[i]
+                .iter()
+                .zip(&mean)
+                .map(|(x, m)| s * (x - m))
+                .collect()
+        })
+        .collect();
+    let m = centred.len();
+    let (values, basis): (Vec<f64>, Vec<Vec<f64>>) = if m >= d {
+        let mut scatter = lower_scatter(&centred, d);
+        if d > FULL_EIGEN_MAX {
+            // Only the top directions are needed: orthogonal iteration on the full matrix.
+            for i in 0..d {
+                for j in 0..i {
+                    scatter[j * d + i] = scatter[i * d + j];
+                }
+            }
+            top_eigen(&scatter, d, max_rank.min(d))
+        } else {
+            let e = sym_eigen(&scatter, d);
+            let values: Vec<f64> = e.values.iter().rev().map(|v| v.max(0.0)).collect();
+            let basis = (0..max_rank.min(d)).map(|k| e.vector(d - 1 - k)).collect();
+            (values, basis)
+        }
+    } else {
+        let mut gram = vec![0.0; m * m];
+        for i in 0..m {
+            for j in 0..=i {
+                gram[i * m + j] = centred[i].iter().zip(&centred[j]).map(|(a, b)| a * b).sum();
+            }
+        }
+        let e = sym_eigen(&gram, m);
+        let values: Vec<f64> = e.values.iter().rev().map(|v| v.max(0.0)).collect();
+        let mut basis: Vec<Vec<f64>> = Vec::new();
+        for k in 0..max_rank.min(m) {
+            let v = e.vector(m - 1 - k);
+            let mut u = vec![0.0; d];
+            for (c, vi) in centred.iter().zip(&v) {
+                for (uj, cj) in u.iter_mut().zip(c) {
+                    *uj += vi * cj;
+                }
+            }
+            // Re-orthogonalise against the previous directions (round-off), then normalise.
+            for b in &basis {
+                let p: f64 = u.iter().zip(b).map(|(x, y)| x * y).sum();
+                u.iter_mut().zip(b).for_each(|(x, y)| *x -= p * y);
+            }
+            let n = u.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if !(n > 0.0) {
+                break;
+            }
+            u.iter_mut().for_each(|x| *x /= n);
+            basis.push(u);
+        }
+        (values, basis)
+    };
+    let top = values.first().copied().unwrap_or(0.0);
+    let magnitude = mean.iter().map(|v| v.abs()).fold(0.0, f64::max);
+    if !(top > 0.0) || top.sqrt() <= 1e-12 * magnitude * sw.sqrt() {
+        return Err("all trajectories coincide".into());
+    }
+    // Directions of (numerically) zero variance carry no information: drop them.
+    let useful = values.iter().take_while(|&&v| v > 1e-24 * top).count();
+    let mut basis = basis;
+    basis.truncate(useful.max(1));
+    Ok((mean, basis, values))
+}
+
+/// Σ c·cᵀ over the vectors `centred` (length d), lower triangle, d × d row-major. Four vectors
+/// at a time: each load and store of the matrix then carries four multiply-adds (about 3× faster
+/// than one at a time for large d).
+fn lower_scatter(centred: &[Vec<f64>], d: usize) -> Vec<f64> {
+    let mut scatter = vec![0.0; d * d];
+    let mut chunks = centred.chunks_exact(4);
+    for quad in &mut chunks {
+        let (c0, c1, c2, c3) = (&quad[0], &quad[1], &quad[2], &quad[3]);
+        for i in 0..d {
+            let (a0, a1, a2, a3) = (c0[i], c1[i], c2[i], c3[i]);
+            let row = &mut scatter[i * d..i * d + i + 1];
+            for ((((s, b0), b1), b2), b3) in row.iter_mut().zip(c0).zip(c1).zip(c2).zip(c3) {
+                *s += a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3;
+            }
+        }
+    }
+    for c in chunks.remainder() {
+        for i in 0..d {
+            let ci = c[i];
+            let row = &mut scatter[i * d..i * d + i + 1];
+            for (s, cj) in row.iter_mut().zip(c) {
+                *s += ci * cj;
+            }
+        }
+    }
+    scatter
+}
+
+/// Squared distances of the tracks to (mean, basis[..r]) for every r in 0..=basis.len():
+/// `out[r][i]`.
+fn residuals_by_rank(tracks: &[&[f64]], mean: &[f64], basis: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let mut out = vec![Vec::with_capacity(tracks.len()); basis.len() + 1];
+    for t in tracks {
+        let mut c: Vec<f64> = t.iter().zip(mean).map(|(x, m)| x - m).collect();
+        out[0].push(c.iter().map(|v| v * v).sum());
+        for (r, b) in basis.iter().enumerate() {
+            let p: f64 = c.iter().zip(b).map(|(x, y)| x * y).sum();
+            c.iter_mut().zip(b).for_each(|(x, y)| *x -= p * y);
+            out[r + 1].push(c.iter().map(|v| v * v).sum());
+        }
+    }
+    out
+}
+
+/// Median of χ²(k) (Wilson–Hilferty).
+fn chi2_median(k: usize) -> f64 {
+    let k = k as f64;
+    k * (1.0 - 2.0 / (9.0 * k)).powi(3)
+}
+
+/// The rank of the tracks by the criterion of the module docs; `scale` is the residual
+/// scale that floors the noise.
+fn select_rank(tracks: &[&[f64]], scale: f64) -> Result<usize, String> {
+    let n = tracks.len();
+    let d = tracks[0].len();
+    let r_max = MAX_RANK.min(n.saturating_sub(2)).min(d - 1).max(1);
+    let (mean, basis, _) = principal(tracks, &vec![1.0; n], r_max)?;
+    let r_max = r_max.min(basis.len());
+    let r_min = 2.min(r_max);
+    if r_min == r_max {
+        return Ok(r_max);
+    }
+    let res = residuals_by_rank(tracks, &mean, &basis);
+    let mut top = res[r_max].clone();
+    let floor = (SIGMA_FLOOR * scale).powi(2) * (d / 2) as f64;
+    let s2 = (median(&mut top) / chi2_median(d - r_max)).max(floor);
+    let (nf, df) = (n as f64, d as f64);
+    let criterion = |r: usize| -> f64 {
+        let cap = 2.0 * (d - r) as f64;
+        let fit: f64 = res[r].iter().map(|e2| (e2 / s2).min(cap)).sum();
+        fit + df.ln() * r as f64 * nf + (df * nf).ln() * (df + (r * (d - r)) as f64)
+    };
+    Ok((r_min..=r_max)
+        .min_by(|&a, &b| criterion(a).total_cmp(&criterion(b)))
+        .unwrap_or(r_min))
+}
+
+/// The subspace of a fixed rank. Points are the tracks (2F values each).
+pub struct SubspaceEstimator<'a> {
+    pub rank: usize,
+    rows: PhantomData<&'a [f64]>,
+}
+
+impl<'a> Estimator for SubspaceEstimator<'a> {
+    type Point = &'a [f64];
+    type Params = SubspaceParams;
+
+    fn min_points(&self) -> usize {
+        self.rank + 1
+    }
+
+    fn fit(&self, points: &[&'a [f64]], weights: &[f64]) -> Result<SubspaceParams, String> {
+        let (mean, basis, _) = principal(points, weights, self.rank)?;
+        Ok(SubspaceParams { mean, basis })
+    }
+
+    fn refine(&self, params: SubspaceParams, _: &[&'a [f64]], _: &[f64]) -> SubspaceParams {
+        params
+    }
+
+    fn residual(&self, p: &SubspaceParams, row: &&'a [f64]) -> f64 {
+        subspace_distance(&p.mean, &p.basis, row)
+    }
+}
+
+/// The per-frame RMS spread of the tracks about their mean (pixels): the residual's scale.
+fn track_scale(tracks: &[&[f64]]) -> f64 {
+    let d = tracks[0].len();
+    let n = tracks.len() as f64;
+    let mean: Vec<f64> = (0..d)
+        .map(|j| tracks.iter().map(|t| t[j]).sum::<f64>() / n)
+        .collect();
+    let ss: f64 = tracks
+        .iter()
+        .map(|t| {
+            t.iter()
+                .zip(&mean)
+                .map(|(x, m)| (x - m).powi(2))
+                .sum::<f64>()
+        })
+        .sum();
+    (ss / (n * (d / 2) as f64)).sqrt()
+}
+
+/// Fits the affine subspace of the tracks robustly, its rank chosen as in the module docs.
+/// Tracks must be validated (same even length ≥ 4, finite).
+pub fn fit_subspace(tracks: &[&[f64]]) -> Result<Robust<SubspaceParams>, String> {
+    let n = tracks.len();
+    if n < 3 {
+        return Err(format!("{n} trajectories, at least 3 needed"));
+    }
+    let scale = track_scale(tracks);
+    // A first rank on all tracks, at most the rigid-motion rank 3: a higher one would let the
+    // subspace swallow a foreign group (its offset is one more direction).
+    let rank = select_rank(tracks, scale)?.min(RIGID_RANK);
+    let est = SubspaceEstimator {
+        rank,
+        rows: PhantomData,
+    };
+    let robust = fit_robust(&est, tracks, scale)?;
+    // The rank once more, on the inliers alone (up to MAX_RANK).
+    let inl: Vec<&[f64]> = tracks
+        .iter()
+        .zip(&robust.inliers)
+        .filter(|(_, v)| **v)
+        .map(|(t, _)| *t)
+        .collect();
+    if inl.len() < 3 {
+        return Ok(robust);
+    }
+    let final_rank = select_rank(&inl, scale)?;
+    if final_rank == rank {
+        return Ok(robust);
+    }
+    let est2 = SubspaceEstimator {
+        rank: final_rank,
+        rows: PhantomData,
+    };
+    let w: Vec<f64> = robust
+        .inliers
+        .iter()
+        .map(|&v| if v { 1.0 } else { 0.0 })
+        .collect();
+    match est2.fit(tracks, &w) {
+        Ok(p) => Ok(evaluate(&est2, p, tracks, scale)),
+        Err(_) => Ok(robust),
+    }
+}
+
+/// The wire model.
+pub fn subspace_model(p: &SubspaceParams) -> Model {
+    Model::Subspace {
+        rank: p.basis.len(),
+        mean: p.mean.clone(),
+        basis: p.basis.clone(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testutil::{Rng, assert_sane, is_degenerate, rotation, view};
+    use super::super::{Family, Model, fit, fit_type};
+    use super::*;
+
+    /// `n` tracks of one rigid motion under an affine camera over `frames` frames: a 3-D
+    /// point cloud (spread `depth` in z) rotating and translating, image = s·(first two rows of
+    /// R_f)·X + t_f (pixels), noise σ per coordinate.
+    fn rigid_tracks(
+        rng: &mut Rng,
+        n: usize,
+        frames: usize,
+        depth: f64,
+        sigma: f64,
+        seed_motion: f64,
+    ) -> Vec<Vec<f64>> {
+        let points: Vec<[f64; 3]> = (0..n)
+            .map(|_| {
+                [
+                    rng.range(-1.0, 1.0),
+                    rng.range(-1.0, 1.0),
+                    depth * rng.range(-1.0, 1.0),
+                ]
+            })
+            .collect();
+        let cams: Vec<([f64; 9], [f64; 2])> = (0..frames)
+            .map(|f| {
+                let a = f as f64 / frames as f64;
+                let r = rotation([0.3 * a + seed_motion, -0.5 * a, 0.2 * a * seed_motion]);
+                (r, [320.0 + 40.0 * a, 240.0 - 25.0 * a])
+            })
+            .collect();
+        points
+            .iter()
+            .map(|x| {
+                let mut row = Vec::with_capacity(2 * frames);
+                for (r, t) in &cams {
+                    for k in 0..2 {
+                        let v = 150.0
+                            * (r[k * 3] * x[0] + r[k * 3 + 1] * x[1] + r[k * 3 + 2] * x[2])
+                            + t[k];
+                        row.push(v + sigma * rng.normal());
+                    }
+                }
+                row
+            })
+            .collect()
+    }
+
+    fn rank_of(m: &Model) -> usize {
+        match m {
+            Model::Subspace { rank, basis, mean } => {
+                assert_eq!(*rank, basis.len());
+                for (i, b) in basis.iter().enumerate() {
+                    assert_eq!(b.len(), mean.len());
+                    for (j, c) in basis.iter().enumerate() {
+                        let dot: f64 = b.iter().zip(c).map(|(x, y)| x * y).sum();
+                        let want = if i == j { 1.0 } else { 0.0 };
+                        assert!((dot - want).abs() < 1e-10, "basis not orthonormal");
+                    }
+                }
+                *rank
+            }
+            m => panic!("{m:?}"),
+        }
+    }
+
+    #[test]
+    fn noise_free_rigid_motion_has_zero_residual() {
+        for frames in [5, 30] {
+            let mut rng = Rng::new(frames as u64);
+            let rows = rigid_tracks(&mut rng, 100, frames, 0.5, 0.0, 0.1);
+            let fit = fit(Family::Subspace, &view(&rows));
+            assert_sane(&fit, rows.len());
+            assert!(fit.rms < 1e-9, "F = {frames}: rms {}", fit.rms);
+            assert_eq!(rank_of(&fit.model), 3, "F = {frames}");
+            assert!(fit.inliers.iter().all(|&v| v));
+        }
+    }
+
+    #[test]
+    fn noisy_rigid_motion() {
+        for frames in [5, 30] {
+            let mut rng = Rng::new(100 + frames as u64);
+            let rows = rigid_tracks(&mut rng, 200, frames, 0.5, 1.0, 0.2);
+            let fit = fit(Family::Subspace, &view(&rows));
+            assert_sane(&fit, rows.len());
+            let r = rank_of(&fit.model);
+            assert!((2..=4).contains(&r), "F = {frames}: rank {r}");
+            // Residual per frame ≈ √(2(D − r)/D)·σ ≤ √2.
+            assert!(fit.rms < 1.5, "F = {frames}: rms {}", fit.rms);
+            assert!(fit.inliers.iter().filter(|&&v| v).count() >= 195);
+        }
+    }
+
+    #[test]
+    fn planar_motion_has_lower_rank() {
+        // Points on a plane z = 0 translating only: x = m + a·X + b·Y (rank 2).
+        let mut rng = Rng::new(7);
+        let rows = rigid_tracks(&mut rng, 80, 6, 0.0, 0.0, 0.0);
+        let fit = fit_type("subspace", &view(&rows)).unwrap();
+        assert!(rank_of(&fit.model) <= 2);
+        assert!(fit.rms < 1e-9);
+    }
+
+    #[test]
+    fn ten_percent_foreign_tracks() {
+        let mut rng = Rng::new(8);
+        let mut rows = rigid_tracks(&mut rng, 90, 8, 0.5, 0.5, 0.1);
+        // Tracks of another, independent motion.
+        rows.extend(
+            rigid_tracks(&mut rng, 10, 8, 0.5, 0.5, 1.3)
+                .into_iter()
+                .map(|mut r| {
+                    for (j, v) in r.iter_mut().enumerate() {
+                        *v += 30.0 * (j as f64 * 0.7).sin();
+                    }
+                    r
+                }),
+        );
+        let fit = fit(Family::Subspace, &view(&rows));
+        assert_sane(&fit, rows.len());
+        assert!(
+            fit.inliers[90..].iter().all(|&v| !v),
+            "{:?}",
+            &fit.inliers[90..]
+        );
+        assert!(fit.inliers[..90].iter().filter(|&&v| v).count() >= 87);
+        let clean = rigid_tracks(&mut Rng::new(8), 90, 8, 0.5, 0.5, 0.1);
+        let truth = fit_type("subspace", &view(&clean)).unwrap();
+        assert!(fit.rms < truth.rms * 1.2, "{} vs {}", fit.rms, truth.rms);
+    }
+
+    #[test]
+    fn few_tracks_use_the_gram_matrix() {
+        // 6 tracks of 30 frames: n < 2F.
+        let mut rng = Rng::new(9);
+        let rows = rigid_tracks(&mut rng, 6, 30, 0.5, 0.0, 0.1);
+        let fit = fit_type("subspace", &view(&rows)).unwrap();
+        assert_sane(&fit, rows.len());
+        assert!(fit.rms < 1e-9, "{}", fit.rms);
+        assert!(rank_of(&fit.model) <= 4);
+    }
+
+    #[test]
+    fn degenerate_subspaces() {
+        let two = vec![vec![1.0, 2.0, 3.0, 4.0], vec![2.0, 3.0, 4.0, 5.0]];
+        let same = vec![vec![1.0, 2.0, 3.0, 4.0]; 10];
+        let odd = vec![vec![1.0, 2.0, 3.0]; 10];
+        let one_frame = vec![vec![1.0, 2.0]; 10];
+        for rows in [&two, &same, &odd, &one_frame] {
+            let fit = fit(Family::Subspace, &view(rows));
+            assert!(is_degenerate(&fit), "{fit:?}");
+            assert_sane(&fit, rows.len());
+        }
+    }
+
+    #[test]
+    fn distance_divides_by_root_f() {
+        let mean = vec![0.0; 4];
+        let basis = vec![vec![1.0, 0.0, 0.0, 0.0]];
+        // Off by (0, 3, 0, 4): distance 5 over F = 2 frames.
+        let d = subspace_distance(&mean, &basis, &[7.0, 3.0, 0.0, 4.0]);
+        assert!((d - 5.0 / 2f64.sqrt()).abs() < 1e-15);
+        assert_eq!(subspace_distance(&mean, &basis, &[1.0, 2.0]), f64::INFINITY);
+    }
+}

@@ -1,0 +1,518 @@
+//! The fit pipeline: one place that reads in the order a fit runs.
+//!
+//! 1. **normalise** ([`check`], [`frames_read`], [`Normalization`], [`rows_read`]): the input
+//!    must be the model's kind; tracks of any length F ≥ 2 are read at the model's frame count
+//!    (frames spread over the whole track, or the first ones, as the card says); coordinates are
+//!    mapped into the frame the network was trained in; a set denser than the model's training
+//!    sets is read at a subset of the training density ([`crate::data::density`]).
+//! 2. **features** ([`network_input`]): the offsets to each point's nearest neighbours. Training
+//!    builds its input with the same function, so training and serving cannot drift apart.
+//! 3. **embed** ([`embed`]): every network of the model on the input and on its images under the
+//!    card's test-time symmetries; each point's unit embeddings side by side, scaled to unit
+//!    length.
+//! 4. **cluster** ([`cluster`]): k-means on the embeddings, K given or chosen from the residual
+//!    curve (SOD or silhouette).
+//! 5. **refine** ([`crate::refine`]): an explicit model per group (line, circle, ellipse,
+//!    homography, fundamental matrix, motion subspace), fitted on the input as sent (every frame,
+//!    caller's units); points reassigned to the structure they fit best, outliers labelled −1.
+//! 6. **answer** ([`FitOutcome`]): labels, K, structures, the residual curve and the stage
+//!    timings.
+
+use std::time::Instant;
+
+use crate::cluster::{self, ClusterError, ClusterParams, Clustering, Points, Selection};
+use crate::data::features::with_neighbors;
+use crate::data::{density, frames};
+use crate::data::symmetry::closure;
+use crate::data::{ImageSize, Kind, Normalization, PointSet, Symmetry};
+use crate::refine::{self, RefineParams, Refined, Structure};
+use crate::registry::{LoadedModel, Observed};
+
+/// Why a fit request cannot be answered by this model.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FitError {
+    #[error("model {model} takes {expected} input, got {found}")]
+    WrongKind {
+        model: String,
+        expected: Kind,
+        found: Kind,
+    },
+    #[error("model {model} takes rows of {expected} values, got {found}")]
+    WrongDim {
+        model: String,
+        expected: usize,
+        found: usize,
+    },
+    #[error(transparent)]
+    Cluster(#[from] ClusterError),
+    #[error("input: {0}")]
+    Input(String),
+}
+
+/// What one fit does beyond the input: K, test-time symmetries, refinement.
+#[derive(Debug, Clone, Copy)]
+pub struct FitOptions<'a> {
+    pub params: &'a ClusterParams,
+    /// Test-time symmetries (`&[]`: the input alone, one forward pass per network).
+    pub symmetries: &'a [Symmetry],
+    /// Geometric refinement, or `None` for the learned clustering alone.
+    pub refine: Option<RefineParams>,
+}
+
+/// The answer to one fit.
+#[derive(Debug, Clone)]
+pub struct FitOutcome {
+    /// The learned clustering (stage 4): its labels, K and residual curve.
+    pub clustering: Clustering,
+    /// The answer's labels: the refined ones (−1 for outliers) with refinement, else the
+    /// clustering's.
+    pub labels: Vec<i64>,
+    /// The answer's structures: one per label 0..k with refinement, none without.
+    pub structures: Vec<Structure>,
+    /// The answer's K (structures, not counting outliers).
+    pub k: usize,
+    /// Quantities of the input outside what the model was validated on.
+    pub warnings: Vec<String>,
+    /// Row-major `[n, embed_dim]`.
+    pub embeddings: Vec<f32>,
+    pub embed_dim: usize,
+    pub embed_ms: f64,
+    pub cluster_ms: f64,
+    pub refine_ms: f64,
+}
+
+
+/// Stage 1: the input is of the model's kind and width. Trajectories of any frame count F ≥ 2
+/// pass: [`frames_read`] brings them to the model's.
+pub fn check(model: &LoadedModel, points: &PointSet) -> Result<(), FitError> {
+    let card = &model.card;
+    if points.kind() != card.kind {
+        return Err(FitError::WrongKind {
+            model: card.name.clone(),
+            expected: card.kind,
+            found: points.kind(),
+        });
+    }
+    let any_length = card.kind == Kind::Trajectories;
+    if points.dim() != card.input_dim && !any_length {
+        return Err(FitError::WrongDim {
+            model: card.name.clone(),
+            expected: card.input_dim,
+            found: points.dim(),
+        });
+    }
+    Ok(())
+}
+
+/// Stage 1: the frames the network reads, `[n, 2F]` -> `[n, input_dim]`: the input itself when
+/// it has the model's width, else its tracks resampled to the model's frame count as the card's
+/// `frames` says. Only trajectories have frames; other kinds pass unchanged.
+pub fn frames_read(model: &LoadedModel, points: &PointSet) -> PointSet {
+    let card = &model.card;
+    if card.kind != Kind::Trajectories || points.dim() == card.input_dim {
+        return points.clone();
+    }
+    frames::resample(points, card.input_dim / 2, card.frames)
+}
+
+/// Stages 1 and 2, the one place the network input is built, for training and serving alike:
+/// normalised `points` `[n, d]` followed by the offsets to each point's `neighbors` nearest
+/// others -> `[n, d * (1 + neighbors)]` row-major.
+pub fn network_input(
+    normalization: Normalization,
+    points: &PointSet,
+    image: Option<ImageSize>,
+    neighbors: usize,
+) -> Vec<f32> {
+    with_neighbors(&normalization.apply(points, image), points.dim(), neighbors)
+}
+
+/// Stages 1 and 2 for one model: checked, read at the model's frames, normalised and with
+/// neighbour offsets: `points` `[n, d]` -> `[n, feature_dim]`.
+pub fn prepare(
+    model: &LoadedModel,
+    points: &PointSet,
+    image: Option<ImageSize>,
+) -> Result<Vec<f32>, FitError> {
+    check(model, points)?;
+    let card = &model.card;
+    Ok(network_input(
+        card.normalization,
+        &frames_read(model, points),
+        image,
+        card.architecture.neighbors,
+    ))
+}
+
+/// Stage 1: the rows of `points` the network reads: `None` for all of them, else a seeded
+/// subset at the density of the model's training sets (cards that record their training
+/// spacing, networks that read neighbours).
+pub fn rows_read(
+    model: &LoadedModel,
+    points: &PointSet,
+    image: Option<ImageSize>,
+    seed: u64,
+) -> Option<Vec<usize>> {
+    let card = &model.card;
+    let k = card.architecture.neighbors;
+    let trained = card.spacing?;
+    let read = frames_read(model, points);
+    let normalised = card.normalization.apply(&read, image);
+    density::thin(&normalised, read.dim(), k, trained, seed)
+}
+
+/// The embeddings of a set: one row per point read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Embedding {
+    /// Row-major `[m, width]`: the points read, in input order.
+    pub values: Vec<f32>,
+    pub width: usize,
+    /// For each input row, its row in `values` (its own, or its nearest read point's); `None`
+    /// when every row was read (m = n).
+    pub owner: Option<Vec<usize>>,
+}
+
+impl Embedding {
+    /// One row per input point `[n, width]`: a point that was not read gets its nearest read
+    /// point's embedding.
+    pub fn per_point(&self) -> Vec<f32> {
+        match &self.owner {
+            None => self.values.clone(),
+            Some(owner) => owner
+                .iter()
+                .flat_map(|&o| &self.values[o * self.width..(o + 1) * self.width])
+                .copied()
+                .collect(),
+        }
+    }
+}
+
+/// Stage 3: the embeddings a fit clusters: `points` `[n, d]` -> `[m, e * c]` over the m rows
+/// read ([`rows_read`], with `seed`), where c counts the networks (the card's and its members)
+/// times the images (the input and its images under every combination of `symmetries`). Row i
+/// holds the embeddings of point i by each network of each image (networks vary fastest), side
+/// by side, divided by the square root of c so that it keeps unit length. An image that does
+/// not exist (a symmetry that does not apply to the kind, or coordinates pushed past the
+/// accepted range) is left out.
+pub fn embed(
+    model: &LoadedModel,
+    points: &PointSet,
+    image: Option<ImageSize>,
+    symmetries: &[Symmetry],
+    seed: u64,
+) -> Result<Embedding, FitError> {
+    check(model, points)?;
+    let rows = rows_read(model, points, image, seed);
+    let owner = match &rows {
+        None => None,
+        Some(rows) => {
+            let read = frames_read(model, points);
+            let normalised = model.card.normalization.apply(&read, image);
+            Some(density::nearest_read(&normalised, read.dim(), rows))
+        }
+    };
+    let (values, width) = embed_rows(model, points, rows.as_deref(), image, symmetries)?;
+    Ok(Embedding {
+        values,
+        width,
+        owner,
+    })
+}
+
+/// [`embed`] of the given rows (`None`: all): -> (`[m, width]`, width).
+fn embed_rows(
+    model: &LoadedModel,
+    points: &PointSet,
+    rows: Option<&[usize]>,
+    image: Option<ImageSize>,
+    symmetries: &[Symmetry],
+) -> Result<(Vec<f32>, usize), FitError> {
+    let e = model.card.architecture.embed_dim;
+    let read = frames_read(model, points);
+    let read = match rows {
+        Some(rows) => read.select(rows).map_err(|e| FitError::Input(e.to_string()))?,
+        None => read,
+    };
+    let m = read.len();
+    let images = if symmetries.is_empty() {
+        vec![read]
+    } else {
+        closure(vec![read], symmetries, |s, p| s.apply_points(p, image))
+    };
+    let mut all = Vec::new();
+    for p in &images {
+        all.extend(model.embed_all(&prepare(model, p, image)?));
+    }
+    if all.len() == 1 {
+        return Ok((all.remove(0), e));
+    }
+    let scale = 1.0 / (all.len() as f32).sqrt();
+    let rows = (0..m)
+        .flat_map(|i| all.iter().flat_map(move |z| &z[i * e..(i + 1) * e]))
+        .map(|v| v * scale)
+        .collect();
+    Ok((rows, e * all.len()))
+}
+
+/// Stage 4: clusters embeddings from [`embed`] on the model's threads: `[m, width]` -> K, the
+/// residual curve and one label per input point (a point that was not read takes its nearest
+/// read point's).
+pub fn cluster(
+    model: &LoadedModel,
+    embedding: &Embedding,
+    params: &ClusterParams,
+) -> Result<Clustering, FitError> {
+    let points = Points::new(&embedding.values, embedding.width)?;
+    let mut clustering = cluster::cluster_on(points, params, model.pool())?;
+    if let Some(owner) = &embedding.owner {
+        clustering.labels = owner.iter().map(|&o| clustering.labels[o]).collect();
+        clustering.cluster_sizes = vec![0; clustering.k];
+        for &l in &clustering.labels {
+            clustering.cluster_sizes[l] += 1;
+        }
+    }
+    Ok(clustering)
+}
+
+/// Stage 5: the learned clustering refined into explicit structures of the model's family,
+/// on `points` as the caller sent them.
+pub fn refine(
+    model: &LoadedModel,
+    points: &PointSet,
+    clustering: &Clustering,
+    params: &RefineParams,
+) -> Refined {
+    refine::refine(
+        points,
+        &clustering.labels,
+        clustering.k,
+        model.card.family(),
+        params,
+    )
+}
+
+/// The whole fit of one point set, stage by stage.
+pub fn fit(
+    model: &LoadedModel,
+    points: &PointSet,
+    image: Option<ImageSize>,
+    options: &FitOptions,
+) -> Result<FitOutcome, FitError> {
+    let FitOptions {
+        params,
+        symmetries,
+        refine: refine_params,
+    } = *options;
+    if let Selection::Fixed(k) = params.selection()
+        && k > points.len()
+    {
+        return Err(ClusterError::KOutOfRange { k, n: points.len() }.into());
+    }
+    let t0 = Instant::now();
+    let embedding = embed(model, points, image, symmetries, params.seed())?;
+    let t1 = Instant::now();
+    let clustering = cluster(model, &embedding, params)?;
+    let t2 = Instant::now();
+    let (labels, structures, k) = match &refine_params {
+        Some(r) => {
+            let refined = refine(model, points, &clustering, r);
+            let k = refined.structures.len();
+            (refined.labels, refined.structures, k)
+        }
+        None => (
+            clustering.labels.iter().map(|&l| l as i64).collect(),
+            Vec::new(),
+            clustering.k,
+        ),
+    };
+    let t3 = Instant::now();
+    let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+    Ok(FitOutcome {
+        warnings: model.card.warnings(&observed(points, image, &labels, k)),
+        clustering,
+        labels,
+        structures,
+        k,
+        embeddings: embedding.per_point(),
+        embed_dim: embedding.width,
+        embed_ms: ms(t0, t1),
+        cluster_ms: ms(t1, t2),
+        refine_ms: ms(t2, t3),
+    })
+}
+
+/// What a fit saw, for the card's validated range: the input's size, frames and image, and the
+/// answer's structure sizes and outlier share.
+fn observed(points: &PointSet, image: Option<ImageSize>, labels: &[i64], k: usize) -> Observed {
+    let mut sizes = vec![0usize; k];
+    for &l in labels {
+        if let Some(s) = usize::try_from(l).ok().and_then(|l| sizes.get_mut(l)) {
+            *s += 1;
+        }
+    }
+    let outliers = labels.iter().filter(|&&l| l < 0).count();
+    Observed {
+        points: points.len(),
+        points_per_structure: sizes
+            .iter()
+            .min()
+            .zip(sizes.iter().max())
+            .map(|(&a, &b)| [a, b]),
+        frames: (points.kind() == Kind::Trajectories).then(|| points.dim() / 2),
+        image_side: image.map(|s| s.width.max(s.height)),
+        outlier_ratio: Some(outliers as f64 / points.len().max(1) as f64),
+    }
+}
+
+impl LoadedModel {
+    /// [`fit`] with the card's test-time symmetries, without refinement.
+    pub fn fit(
+        &self,
+        points: &PointSet,
+        image: Option<ImageSize>,
+        params: &ClusterParams,
+    ) -> Result<FitOutcome, FitError> {
+        self.fit_with(points, image, params, &self.card.test_symmetries)
+    }
+
+    /// [`fit`] with the given test-time symmetries instead of the card's, without refinement.
+    pub fn fit_with(
+        &self,
+        points: &PointSet,
+        image: Option<ImageSize>,
+        params: &ClusterParams,
+        symmetries: &[Symmetry],
+    ) -> Result<FitOutcome, FitError> {
+        let options = FitOptions {
+            params,
+            symmetries,
+            refine: None,
+        };
+        fit(self, points, image, &options)
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use crate::registry::tests::tiny;
+
+    /// Ten 2-frame tracks with coordinates `(v * a) % m`, a 20 x 20 image and k-means with K = 2.
+    pub(crate) fn ten_tracks(a: usize, m: usize) -> (PointSet, Option<ImageSize>, ClusterParams) {
+        let values = (0..40).map(|v| ((v * a) % m) as f64).collect();
+        let points = PointSet::from_flat(Kind::Trajectories, 4, values).unwrap();
+        let image = Some(ImageSize::new(20.0, 20.0).unwrap());
+        let params = ClusterParams::builder()
+            .selection(Selection::Fixed(2))
+            .seed(1)
+            .build()
+            .unwrap();
+        (points, image, params)
+    }
+
+    #[test]
+    fn test_symmetries_concatenate_unit_embeddings_of_every_image() {
+        let (points, image, params) = ten_tracks(7, 13);
+        let plain = tiny(vec![]);
+        let both = tiny(vec![Symmetry::Mirror, Symmetry::Reverse]);
+        let a = plain.fit(&points, image, &params).unwrap();
+        let b = both.fit(&points, image, &params).unwrap();
+        assert_eq!((a.embed_dim, b.embed_dim), (3, 12));
+        assert_eq!(b.embeddings.len(), 12 * points.len());
+        assert_eq!(b.clustering.labels.len(), points.len());
+        // Row i: [input, mirrored, reversed, mirrored and reversed] embeddings of point i, / 2.
+        let image_of = |ss: &[Symmetry]| {
+            let p = ss
+                .iter()
+                .fold(points.clone(), |p, s| s.apply_points(&p, image).unwrap());
+            plain.fit(&p, image, &params).unwrap().embeddings
+        };
+        let blocks = [
+            a.embeddings.clone(),
+            image_of(&[Symmetry::Mirror]),
+            image_of(&[Symmetry::Reverse]),
+            image_of(&[Symmetry::Mirror, Symmetry::Reverse]),
+        ];
+        for i in 0..points.len() {
+            let row = &b.embeddings[i * 12..(i + 1) * 12];
+            let norm = row.iter().map(|v| v * v).sum::<f32>().sqrt();
+            assert!((norm - 1.0).abs() < 1e-4, "row {i} has norm {norm}");
+            for (c, block) in blocks.iter().enumerate() {
+                for j in 0..3 {
+                    let want = block[i * 3 + j] / 2.0;
+                    assert!((row[c * 3 + j] - want).abs() < 1e-6, "row {i} block {c}");
+                }
+            }
+        }
+        // The mirrored input's own block differs from the input's: the images are real inputs.
+        assert!((0..3).any(|j| (blocks[0][j] - blocks[1][j]).abs() > 1e-4));
+        // Without symmetries the same model embeds the input alone; quarter turns give 4 images.
+        let alone = both.fit_with(&points, image, &params, &[]).unwrap();
+        assert_eq!(alone.embeddings, a.embeddings);
+        let turns = both
+            .fit_with(&points, image, &params, &[Symmetry::Rotate])
+            .unwrap();
+        assert_eq!(turns.embed_dim, 12);
+        // An image whose coordinates would leave the accepted range is left out, not an error:
+        // mirrored about x = 5e8, x = -1e9 would become 2e9.
+        let far = PointSet::from_flat(
+            Kind::Trajectories,
+            4,
+            vec![-1e9, 0.0, -1e9, 1.0, 1e9, 0.0, 1e9, 1.0, 0.0, 5.0, 1.0, 6.0],
+        )
+        .unwrap();
+        let wide = Some(ImageSize::new(1e9, 10.0).unwrap());
+        let fit = both
+            .fit_with(&far, wide, &params, &[Symmetry::Mirror])
+            .unwrap();
+        assert_eq!(fit.embed_dim, 3);
+        assert_eq!(fit.embeddings.len(), 3 * 3);
+    }
+
+
+    #[test]
+    fn trajectory_models_read_tracks_of_any_length() {
+        let model = tiny(vec![]);
+        let (points, image, params) = ten_tracks(7, 13);
+        // The same tracks with a middle frame between their two: spread over three frames,
+        // the model's two frames are the first and the last, the tracks it was given.
+        let values = (0..points.len())
+            .flat_map(|i| {
+                let r = points.row(i);
+                [r[0], r[1], (r[0] + r[2]) / 2.0, (r[1] + r[3]) / 2.0, r[2], r[3]]
+            })
+            .collect();
+        let longer = PointSet::from_flat(Kind::Trajectories, 6, values).unwrap();
+        let a = model.fit(&points, image, &params).unwrap();
+        let b = model.fit(&longer, image, &params).unwrap();
+        assert_eq!(a.embeddings, b.embeddings);
+        assert_eq!(a.labels, b.labels);
+        // Other kinds still need the model's width.
+        let flat = PointSet::from_flat(Kind::Points2d, 2, vec![0.0; 20]).unwrap();
+        assert!(matches!(
+            model.fit(&flat, None, &params),
+            Err(FitError::WrongKind { .. })
+        ));
+    }
+
+    #[test]
+    fn refinement_answers_structures_and_counts_them_as_k() {
+        let model = tiny(vec![]);
+        let (points, image, params) = ten_tracks(7, 13);
+        let options = FitOptions {
+            params: &params,
+            symmetries: &[],
+            refine: Some(RefineParams::default()),
+        };
+        let fit = fit(&model, &points, image, &options).unwrap();
+        assert_eq!(fit.labels.len(), points.len());
+        assert_eq!(fit.k, fit.structures.len());
+        for (label, s) in fit.structures.iter().enumerate() {
+            assert_eq!(s.label, label);
+            let carried = fit.labels.iter().filter(|&&l| l == label as i64).count();
+            assert_eq!(s.inliers, carried);
+            assert!(s.rms.is_finite());
+        }
+        assert!(fit.refine_ms >= 0.0);
+    }
+}

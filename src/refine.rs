@@ -1,0 +1,468 @@
+//! Stage 5 of a fit: geometric refinement of the learned clustering, and outliers.
+//!
+//! The learned groups are the start. Each group gets an explicit model of its family
+//! ([`geometry::fit`]: robust inside the group, its type chosen by GRIC or BIC), fitted on the
+//! input as the caller sent it (every frame of a track, pixel units). Then, to a fixed point or
+//! [`MAX_ITERATIONS`] rounds:
+//!
+//! 1. every point goes to the structure with the smallest residual r_j(x) (a geometric distance
+//!    in the caller's units: all structures of a fit measure in the same units);
+//! 2. a point whose smallest residual exceeds the outlier threshold τ is labelled −1 (when
+//!    outliers are allowed);
+//! 3. every structure is fitted again on its points; a structure left with fewer than half the
+//!    points it started with, or fewer than its model needs, is dropped and its points go to the
+//!    others in the next round.
+//!
+//! **Noise and threshold.** The noise level σ is the median of the groups' robust noise levels
+//! (each 1.4826 × the median residual inside its group, [`geometry::Fit::sigma`]): the sensor's
+//! noise, shared by every structure, and not moved by one group of outliers. τ = [`OUTLIER_SIGMAS`]
+//! × σ, or the caller's `outlier_threshold`. A learned group whose robust fit explains less than
+//! [`OUTLIER_GROUP_INLIERS`] of its points follows no model: it is the outlier group that models
+//! trained with outliers as one more group learn (AdelaideRMF), and it is dissolved: its points go
+//! to a structure they fit, or become outliers.
+//!
+//! **Merging.** Two structures whose union one model of the same family fits with a noise level
+//! within [`MERGE_SIGMAS`] × σ are one structure seen twice (K chosen too high), and merge.
+//!
+//! Groups whose model is degenerate (too few or collinear points) keep their learned points and
+//! never take others'.
+
+use crate::data::{Kind, PointSet};
+use crate::geometry::{self, Family, Model};
+
+/// Most reassignment rounds.
+pub const MAX_ITERATIONS: usize = 10;
+/// Outlier threshold in units of the fit's noise level σ.
+pub const OUTLIER_SIGMAS: f64 = 3.0;
+/// A learned group whose own model explains less than this share of its points follows no
+/// model: an outlier group.
+pub const OUTLIER_GROUP_INLIERS: f64 = 0.5;
+/// Two structures whose joint fit is within this many σ merge.
+pub const MERGE_SIGMAS: f64 = 1.5;
+
+/// What refinement may do.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefineParams {
+    /// Whether points that fit no structure are labelled −1.
+    pub outliers: bool,
+    /// A fixed outlier threshold in the caller's units, instead of [`OUTLIER_SIGMAS`] × σ.
+    pub threshold: Option<f64>,
+}
+
+impl Default for RefineParams {
+    fn default() -> Self {
+        Self {
+            outliers: true,
+            threshold: None,
+        }
+    }
+}
+
+/// One structure of the answer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Structure {
+    /// Its label in [`Refined::labels`].
+    pub label: usize,
+    pub model: Model,
+    /// Points labelled with it.
+    pub inliers: usize,
+    /// RMS residual of those points, caller's units.
+    pub rms: f64,
+}
+
+/// The refined answer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Refined {
+    /// One per point: a structure's label, or −1 for an outlier.
+    pub labels: Vec<i64>,
+    /// One per label 0..k, in label order.
+    pub structures: Vec<Structure>,
+    /// The noise level σ the threshold was set from (caller's units).
+    pub sigma: f64,
+}
+
+/// The family of models a model card's structures follow.
+pub fn family_for(kind: Kind, name_hint: Option<Family>) -> Family {
+    match (kind, name_hint) {
+        (_, Some(f)) => f,
+        (Kind::Points2d, None) => Family::Curves,
+        (Kind::Correspondences, None) => Family::Fundamental,
+        (Kind::Trajectories, None) => Family::Subspace,
+    }
+}
+
+/// One group being refined.
+struct Group {
+    fit: geometry::Fit,
+    /// Points it started with.
+    start: usize,
+    /// Degenerate: keeps its learned points, takes no others.
+    frozen: bool,
+}
+
+/// Refines a clustering of `points` (`labels` in 0..k, one per row) into structures of
+/// `family`: `points` `[n, d]`, labels `[n]` -> labels `[n]` (−1 for outliers) and one model per
+/// remaining label.
+pub fn refine(
+    points: &PointSet,
+    labels: &[usize],
+    k: usize,
+    family: Family,
+    params: &RefineParams,
+) -> Refined {
+    let n = points.len();
+    let members = |labels: &[i64], j: usize| -> Vec<usize> {
+        (0..n).filter(|&i| labels[i] == j as i64).collect()
+    };
+    let fit_on = |idx: &[usize]| {
+        let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
+        geometry::fit(family, &rows)
+    };
+    let mut current: Vec<i64> = labels.iter().map(|&l| l as i64).collect();
+    let mut groups: Vec<Option<Group>> = (0..k)
+        .map(|j| {
+            let idx = members(&current, j);
+            let fit = fit_on(&idx);
+            let frozen = matches!(fit.model, Model::Degenerate { .. });
+            Some(Group {
+                fit,
+                start: idx.len(),
+                frozen,
+            })
+        })
+        .collect();
+    let sigma = noise_level(&groups);
+    // Outlier groups are dissolved, when outliers may be answered.
+    if params.outliers {
+        for g in groups.iter_mut() {
+            let explained = |g: &Group| {
+                let inliers = g.fit.inliers.iter().filter(|&&v| v).count();
+                inliers as f64 >= OUTLIER_GROUP_INLIERS * g.start as f64
+            };
+            if g.as_ref().is_some_and(|g| !g.frozen && !explained(g)) {
+                *g = None;
+            }
+        }
+    }
+    let threshold = params
+        .threshold
+        .unwrap_or(OUTLIER_SIGMAS * sigma)
+        .max(f64::MIN_POSITIVE);
+    for _ in 0..MAX_ITERATIONS {
+        let next = assign(points, &current, &groups, params.outliers, threshold);
+        let changed = next != current;
+        current = next;
+        for (j, slot) in groups.iter_mut().enumerate() {
+            let Some(g) = slot else { continue };
+            if g.frozen {
+                continue;
+            }
+            let idx = members(&current, j);
+            let fit = fit_on(&idx);
+            if 2 * idx.len() < g.start || matches!(fit.model, Model::Degenerate { .. }) {
+                *slot = None;
+            } else {
+                g.fit = fit;
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    merge(points, &mut current, &mut groups, family, sigma);
+    // Points of dropped groups that the last round did not move.
+    let current = assign(points, &current, &groups, params.outliers, threshold);
+    answer(points, current, groups, sigma)
+}
+
+/// The fit's noise level: the median of the live, non-degenerate groups' own levels (0 when
+/// none has one).
+fn noise_level(groups: &[Option<Group>]) -> f64 {
+    let mut s: Vec<f64> = groups
+        .iter()
+        .flatten()
+        .filter(|g| !g.frozen && g.fit.sigma.is_finite())
+        .map(|g| g.fit.sigma)
+        .collect();
+    if s.is_empty() {
+        return 0.0;
+    }
+    s.sort_by(f64::total_cmp);
+    s[(s.len() - 1) / 2]
+}
+
+/// Every point to its nearest live structure (−1 past `threshold` when outliers are allowed);
+/// points of frozen groups stay.
+fn assign(
+    points: &PointSet,
+    current: &[i64],
+    groups: &[Option<Group>],
+    outliers: bool,
+    threshold: f64,
+) -> Vec<i64> {
+    let live: Vec<(usize, &Model)> = groups
+        .iter()
+        .enumerate()
+        .filter_map(|(j, g)| g.as_ref().filter(|g| !g.frozen).map(|g| (j, &g.fit.model)))
+        .collect();
+    (0..points.len())
+        .map(|i| {
+            let here = current[i];
+            let frozen = here >= 0
+                && groups
+                    .get(here as usize)
+                    .and_then(Option::as_ref)
+                    .is_some_and(|g| g.frozen);
+            if frozen || live.is_empty() {
+                return if frozen || !outliers { here } else { -1 };
+            }
+            let row = points.row(i);
+            let (j, r) = live
+                .iter()
+                .map(|&(j, m)| (j, m.residual(row)))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .unwrap_or((live[0].0, f64::INFINITY));
+            if outliers && !(r <= threshold) {
+                -1
+            } else {
+                j as i64
+            }
+        })
+        .collect()
+}
+
+/// Merges pairs of live structures that one model fits together within [`MERGE_SIGMAS`] × σ,
+/// best pair first, until no pair does.
+fn merge(
+    points: &PointSet,
+    current: &mut [i64],
+    groups: &mut [Option<Group>],
+    family: Family,
+    sigma: f64,
+) {
+    if sigma <= 0.0 {
+        return;
+    }
+    loop {
+        let live: Vec<usize> = (0..groups.len())
+            .filter(|&j| groups[j].as_ref().is_some_and(|g| !g.frozen))
+            .collect();
+        let mut best: Option<(f64, usize, usize, geometry::Fit)> = None;
+        for (a, &ja) in live.iter().enumerate() {
+            for &jb in &live[a + 1..] {
+                let rows: Vec<&[f64]> = (0..points.len())
+                    .filter(|&i| current[i] == ja as i64 || current[i] == jb as i64)
+                    .map(|i| points.row(i))
+                    .collect();
+                let fit = geometry::fit(family, &rows);
+                let ok = !matches!(fit.model, Model::Degenerate { .. })
+                    && fit.sigma <= MERGE_SIGMAS * sigma
+                    && fit.inliers.iter().filter(|&&v| v).count() * 10 >= rows.len() * 9;
+                if ok && best.as_ref().is_none_or(|b| fit.sigma < b.0) {
+                    best = Some((fit.sigma, ja, jb, fit));
+                }
+            }
+        }
+        let Some((_, ja, jb, fit)) = best else { return };
+        for l in current.iter_mut() {
+            if *l == jb as i64 {
+                *l = ja as i64;
+            }
+        }
+        let absorbed = groups[jb].take().map_or(0, |g| g.start);
+        if let Some(g) = groups[ja].as_mut() {
+            g.start += absorbed;
+            g.fit = fit;
+        }
+    }
+}
+
+/// Compact labels 0..k over the groups that hold points, in their order, with each structure's
+/// count and RMS residual.
+fn answer(points: &PointSet, current: Vec<i64>, groups: Vec<Option<Group>>, sigma: f64) -> Refined {
+    let mut renumber = vec![-1i64; groups.len()];
+    let mut structures = Vec::new();
+    for (j, g) in groups.into_iter().enumerate() {
+        let Some(g) = g else { continue };
+        let idx: Vec<usize> = (0..points.len()).filter(|&i| current[i] == j as i64).collect();
+        if idx.is_empty() {
+            continue;
+        }
+        let label = structures.len();
+        renumber[j] = label as i64;
+        let rms = if g.frozen {
+            0.0
+        } else {
+            let ss: f64 = idx.iter().map(|&i| g.fit.model.residual(points.row(i)).powi(2)).sum();
+            (ss / idx.len() as f64).sqrt()
+        };
+        structures.push(Structure {
+            label,
+            model: g.fit.model,
+            inliers: idx.len(),
+            rms: if rms.is_finite() { rms } else { 0.0 },
+        });
+    }
+    let labels = current
+        .into_iter()
+        .map(|l| if l < 0 { -1 } else { renumber[l as usize] })
+        .collect();
+    Refined {
+        labels,
+        structures,
+        sigma,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two noisy circles of radius 1 and 2 around (0, 0) and (10, 0), `m` points each, with
+    /// deterministic noise of about `noise`.
+    fn two_circles(m: usize, noise: f64) -> (PointSet, Vec<usize>) {
+        let mut values = Vec::new();
+        let mut labels = Vec::new();
+        for i in 0..2 * m {
+            let (c, r) = if i % 2 == 0 { (0.0, 1.0) } else { (10.0, 2.0) };
+            let t = i as f64 * 0.7;
+            let e = noise * (((i * 7919) % 101) as f64 / 50.0 - 1.0);
+            values.extend([c + (r + e) * t.cos(), (r + e) * t.sin()]);
+            labels.push(i % 2);
+        }
+        (
+            PointSet::from_flat(Kind::Points2d, 2, values).unwrap(),
+            labels,
+        )
+    }
+
+    fn finite(refined: &Refined) -> bool {
+        refined.sigma.is_finite()
+            && refined.structures.iter().all(|s| {
+                s.rms.is_finite()
+                    && serde_json::to_string(&s.model)
+                        .is_ok_and(|j| !j.contains("NaN") && !j.contains("null"))
+            })
+    }
+
+    #[test]
+    fn misassigned_points_go_back_to_the_structure_they_fit() {
+        let (points, truth) = two_circles(60, 0.01);
+        // Ten points of the first circle start in the second's group.
+        let mut start = truth.clone();
+        for l in start.iter_mut().step_by(2).take(10) {
+            *l = 1;
+        }
+        let r = refine(&points, &start, 2, Family::Curves, &RefineParams::default());
+        let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
+        assert_eq!(r.labels, want);
+        assert_eq!(r.structures.len(), 2);
+        for (s, (cx, radius)) in r.structures.iter().zip([(0.0, 1.0), (10.0, 2.0)]) {
+            match s.model {
+                Model::Circle { cx: x, cy, r } => {
+                    assert!((x - cx).abs() < 0.02 && cy.abs() < 0.02 && (r - radius).abs() < 0.02)
+                }
+                ref other => panic!("{other:?}"),
+            }
+            assert_eq!(s.inliers, 60);
+        }
+        assert!(finite(&r));
+    }
+
+    #[test]
+    fn far_points_are_outliers_unless_outliers_are_off() {
+        let (points, truth) = two_circles(40, 0.01);
+        let mut values = points.values().to_vec();
+        values.extend([5.0, 8.0, -4.0, -6.0]);
+        let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
+        let mut start = truth.clone();
+        start.extend([0, 1]);
+        let r = refine(&points, &start, 2, Family::Curves, &RefineParams::default());
+        assert_eq!(&r.labels[80..], &[-1, -1]);
+        assert!(r.labels[..80].iter().all(|&l| l >= 0));
+        let kept = RefineParams {
+            outliers: false,
+            threshold: None,
+        };
+        let r = refine(&points, &start, 2, Family::Curves, &kept);
+        assert!(r.labels.iter().all(|&l| l >= 0));
+        // A caller's threshold in its own units: 100 keeps both far points.
+        let wide = RefineParams {
+            outliers: true,
+            threshold: Some(100.0),
+        };
+        let r = refine(&points, &start, 2, Family::Curves, &wide);
+        assert!(r.labels.iter().all(|&l| l >= 0));
+    }
+
+    #[test]
+    fn one_structure_split_in_two_is_merged() {
+        let (points, truth) = two_circles(40, 0.01);
+        // The first circle's points in two groups (0 and 2).
+        let start: Vec<usize> = truth
+            .iter()
+            .enumerate()
+            .map(|(i, &l)| if l == 0 && i % 4 == 0 { 2 } else { l })
+            .collect();
+        let r = refine(&points, &start, 3, Family::Curves, &RefineParams::default());
+        assert_eq!(r.structures.len(), 2);
+        let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
+        assert_eq!(r.labels, want);
+    }
+
+    #[test]
+    fn degenerate_and_tiny_groups_never_give_nan_or_panic() {
+        let cases: Vec<(Kind, usize, Vec<f64>, Vec<usize>, usize, Family)> = vec![
+            // Two points, two groups.
+            (Kind::Points2d, 2, vec![0.0, 0.0, 1.0, 1.0], vec![0, 1], 2, Family::Curves),
+            // Coincident points.
+            (Kind::Points2d, 2, vec![3.0; 20], vec![0; 10], 1, Family::Curves),
+            // Collinear correspondences, too few for F.
+            (
+                Kind::Correspondences,
+                4,
+                (0..5).flat_map(|i| [i as f64, 0.0, i as f64 + 1.0, 0.0]).collect(),
+                vec![0, 0, 0, 1, 1],
+                2,
+                Family::Fundamental,
+            ),
+            (
+                Kind::Correspondences,
+                4,
+                (0..6).flat_map(|i| [i as f64, 2.0 * i as f64, 1.0, 1.0]).collect(),
+                vec![0; 6],
+                1,
+                Family::Homography,
+            ),
+            // Identical tracks.
+            (Kind::Trajectories, 6, vec![1.0; 30], vec![0, 0, 1, 1, 1], 2, Family::Subspace),
+            // Huge values.
+            (
+                Kind::Points2d,
+                2,
+                vec![1e9, -1e9, -1e9, 1e9, 1e9, 1e9, 0.0, 0.0],
+                vec![0, 0, 0, 0],
+                1,
+                Family::Curves,
+            ),
+        ];
+        for (kind, dim, values, labels, k, family) in cases {
+            let points = PointSet::from_flat(kind, dim, values).unwrap();
+            for outliers in [true, false] {
+                let params = RefineParams {
+                    outliers,
+                    threshold: None,
+                };
+                let r = refine(&points, &labels, k, family, &params);
+                assert_eq!(r.labels.len(), points.len(), "{kind} {family:?}");
+                assert!(finite(&r), "{kind} {family:?}: {r:?}");
+                let k = r.structures.len() as i64;
+                assert!(r.labels.iter().all(|&l| (-1..k).contains(&l)));
+                for (label, s) in r.structures.iter().enumerate() {
+                    assert_eq!(s.label, label);
+                    assert!(s.inliers > 0);
+                }
+            }
+        }
+    }
+}

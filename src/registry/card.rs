@@ -1,0 +1,338 @@
+//! The model card, `model.json`: what a model is (kind, input, normalisation, architecture),
+//! how it was trained and what it scored, checked on every read.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use super::RegistryError;
+use crate::cluster::Selection;
+use crate::data::symmetry;
+use crate::data::frames::FrameSampling;
+use crate::geometry::Family;
+use crate::data::{Kind, Normalization, Symmetry};
+use crate::loss::Loss;
+use crate::model::ModelConfig;
+
+/// File names inside a model directory.
+pub const CARD_FILE: &str = "model.json";
+pub const WEIGHTS_FILE: &str = "weights.safetensors";
+
+/// How a model was trained: enough to reproduce it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrainingInfo {
+    /// What data and protocol it saw.
+    pub data: String,
+    /// The exact command that trained it.
+    pub command: String,
+    pub epochs: usize,
+    pub learning_rate: f64,
+    pub seed: u64,
+    /// Wall time of the training run on the machine named in `machine`.
+    pub seconds: f64,
+    pub machine: String,
+}
+
+/// A reported metric with the command that measured it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MetricRecord {
+    pub name: String,
+    pub value: f64,
+    pub protocol: String,
+    pub command: String,
+}
+
+/// A further network in an ensemble: same architecture, input and normalisation as the card's
+/// own network, its own weights and training.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Member {
+    /// Its weights file, a plain file name inside the model directory.
+    pub weights: String,
+    pub loss: Loss,
+    pub training: TrainingInfo,
+}
+
+/// The model card, `model.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelCard {
+    pub name: String,
+    pub version: String,
+    pub kind: Kind,
+    pub input_dim: usize,
+    pub normalization: Normalization,
+    pub architecture: ModelConfig,
+    pub loss: Loss,
+    /// Default largest K tried by automatic selection.
+    pub k_max: usize,
+    /// Default K selection (`sod` or `silhouette`).
+    pub selection: Selection,
+    pub training: TrainingInfo,
+    /// Test-time symmetries: the input's images under every combination of these are embedded
+    /// too, and each point's embeddings are concatenated (scaled to unit length) before
+    /// clustering. Empty: the input alone, as in the paper.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub test_symmetries: Vec<Symmetry>,
+    /// Further networks (an ensemble): a fit embeds every test image with the card's network
+    /// (`weights.safetensors`, `loss`, `training`) and with each of these, and sets all the
+    /// embeddings of a point side by side. Empty: one network, as in the paper.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub members: Vec<Member>,
+    /// Trajectory models: which frames of a track of another length the network reads.
+    #[serde(default)]
+    pub frames: FrameSampling,
+    /// Whether fits refine the learned groups into geometric structures by default.
+    #[serde(default)]
+    pub refine: bool,
+    /// Whether refinement labels points that fit no structure −1 by default (data without gross
+    /// outliers, such as tracks, is better served without).
+    #[serde(default = "yes")]
+    pub outliers: bool,
+    /// The models a structure may follow; default by kind: curves for points2d, fundamental
+    /// (or homography where GRIC prefers it) for correspondences, subspaces for trajectories.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub geometry: Option<Family>,
+    /// The spacing of the training sets (median distance from a point to its k-th nearest other
+    /// point, k = `architecture.neighbors`, normalised coordinates): a denser set is read at a
+    /// subset of this density ([`crate::data::density`]). `None`: every set is read whole.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spacing: Option<f64>,
+    /// The range of inputs the model was validated on; a fit outside it answers with warnings.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub validated: Option<ValidatedRange>,
+    #[serde(default)]
+    pub metrics: Vec<MetricRecord>,
+    /// multifit version and git commit that trained it.
+    pub multifit_version: String,
+    #[serde(default)]
+    pub git_commit: Option<String>,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// The inputs a model was validated on: every bound inclusive, every field optional.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ValidatedRange {
+    /// Points in a set.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub points: Option<[usize; 2]>,
+    /// Points per structure (the answer's smallest and largest group).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub points_per_structure: Option<[usize; 2]>,
+    /// Frames per track.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frames: Option<[usize; 2]>,
+    /// The longer image side, pixels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub image_side: Option<[f64; 2]>,
+    /// Share of points that are outliers.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outlier_ratio: Option<[f64; 2]>,
+    /// Where these bounds come from (the data the model was trained and validated on).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub source: String,
+}
+
+/// What a fit saw, measured against a [`ValidatedRange`].
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Observed {
+    pub points: usize,
+    /// The smallest and largest structure of the answer.
+    pub points_per_structure: Option<[usize; 2]>,
+    pub frames: Option<usize>,
+    pub image_side: Option<f64>,
+    pub outlier_ratio: Option<f64>,
+}
+
+impl ValidatedRange {
+    /// One warning per observed quantity outside its bounds, naming it, its value and the range.
+    pub fn warnings(&self, seen: &Observed) -> Vec<String> {
+        fn out<T: PartialOrd + std::fmt::Display + Copy>(
+            name: &str,
+            value: Option<T>,
+            range: Option<[T; 2]>,
+            warnings: &mut Vec<String>,
+        ) {
+            if let (Some(v), Some([lo, hi])) = (value, range)
+                && (v < lo || v > hi)
+            {
+                warnings.push(format!(
+                    "{name} {v} is outside the range the model was validated on ({lo} to {hi})"
+                ));
+            }
+        }
+        let mut w = Vec::new();
+        out("points", Some(seen.points), self.points, &mut w);
+        if let Some([small, large]) = seen.points_per_structure {
+            let range = self.points_per_structure;
+            out("smallest structure's points", Some(small), range, &mut w);
+            out("largest structure's points", Some(large), range, &mut w);
+        }
+        out("frames", seen.frames, self.frames, &mut w);
+        out("image side", seen.image_side, self.image_side, &mut w);
+        let ratio = seen.outlier_ratio.map(|v| (v * 1e3).round() / 1e3);
+        out("outlier ratio", ratio, self.outlier_ratio, &mut w);
+        w
+    }
+}
+
+impl ModelCard {
+    /// The models a structure of this model may follow.
+    pub fn family(&self) -> Family {
+        self.geometry.unwrap_or(match self.kind {
+            Kind::Points2d => Family::Curves,
+            Kind::Correspondences => Family::Fundamental,
+            Kind::Trajectories => Family::Subspace,
+        })
+    }
+
+    /// Warnings for a fit outside the card's validated range (none without a range).
+    pub fn warnings(&self, seen: &Observed) -> Vec<String> {
+        self.validated
+            .as_ref()
+            .map_or_else(Vec::new, |v| v.warnings(seen))
+    }
+
+    /// Checks the card is internally consistent.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.name.is_empty()
+            || !self
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        {
+            return Err(format!(
+                "name {:?} must be non-empty ASCII letters, digits, '-' or '_'",
+                self.name
+            ));
+        }
+        if self.input_dim != self.architecture.input_dim {
+            return Err(format!(
+                "input_dim {} differs from architecture.input_dim {}",
+                self.input_dim, self.architecture.input_dim
+            ));
+        }
+        if !self.kind.accepts_dim(self.input_dim) {
+            return Err(format!(
+                "input_dim {} is not valid for kind {}",
+                self.input_dim, self.kind
+            ));
+        }
+        if self.normalization != Normalization::for_kind(self.kind) {
+            return Err(format!(
+                "normalization {:?} is not the one kind {} uses",
+                self.normalization, self.kind
+            ));
+        }
+        if self.k_max == 0 {
+            return Err("k_max must be at least 1".into());
+        }
+        if matches!(self.selection, Selection::Fixed(_)) {
+            return Err("the default selection must be sod or silhouette".into());
+        }
+        symmetry::check(&self.test_symmetries, self.kind)
+            .map_err(|e| format!("test_symmetries: {e}"))?;
+        let files: Vec<&str> = self.weight_files().collect();
+        for (i, file) in files.iter().enumerate().skip(1) {
+            let plain = Path::new(file).file_name() == Some(file.as_ref());
+            if !plain || !file.ends_with(".safetensors") {
+                return Err(format!(
+                    "members: weights {file:?} must be a plain .safetensors file name"
+                ));
+            }
+            if files[..i].contains(file) {
+                return Err(format!("members: weights {file:?} named twice"));
+            }
+        }
+        self.architecture.validate().map_err(|e| e.to_string())
+    }
+
+    /// The weight files of the model's networks, relative to its directory: the card's own
+    /// network ([`WEIGHTS_FILE`]) first, then each member's.
+    pub fn weight_files(&self) -> impl Iterator<Item = &str> {
+        std::iter::once(WEIGHTS_FILE).chain(self.members.iter().map(|m| m.weights.as_str()))
+    }
+
+    pub fn read(dir: &Path) -> Result<Self, RegistryError> {
+        let path = dir.join(CARD_FILE);
+        let text = std::fs::read_to_string(&path).map_err(|source| RegistryError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let card: ModelCard = serde_json::from_str(&text).map_err(|e| RegistryError::Card {
+            path: path.clone(),
+            reason: e.to_string(),
+        })?;
+        card.validate()
+            .map_err(|reason| RegistryError::Card { path, reason })?;
+        Ok(card)
+    }
+
+    pub fn write(&self, dir: &Path) -> std::io::Result<()> {
+        std::fs::create_dir_all(dir)?;
+        let text = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
+        std::fs::write(dir.join(CARD_FILE), text + "\n")
+    }
+}
+
+/// A model card for a network trained in this process (used for folds and `train`).
+pub fn card_for(
+    name: &str,
+    kind: Kind,
+    architecture: &ModelConfig,
+    loss: Loss,
+    k_max: usize,
+    training: TrainingInfo,
+) -> ModelCard {
+    ModelCard {
+        name: name.to_string(),
+        version: "1".into(),
+        kind,
+        input_dim: architecture.input_dim,
+        normalization: Normalization::for_kind(kind),
+        architecture: architecture.clone(),
+        loss,
+        k_max,
+        selection: crate::cluster::Selection::Sod,
+        training,
+        test_symmetries: vec![],
+        members: vec![],
+        frames: FrameSampling::default(),
+        refine: false,
+        outliers: true,
+        geometry: None,
+        spacing: None,
+        validated: None,
+        metrics: vec![],
+        multifit_version: env!("CARGO_PKG_VERSION").into(),
+        git_commit: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::registry::tests::tiny;
+
+    #[test]
+    fn cards_refuse_symmetries_that_do_not_apply() {
+        let mut card = tiny(vec![]).card;
+        card.test_symmetries = vec![Symmetry::Mirror, Symmetry::Mirror];
+        assert!(card.validate().unwrap_err().contains("repeated"));
+        card.kind = Kind::Points2d;
+        card.input_dim = 2;
+        card.architecture.input_dim = 2;
+        card.normalization = Normalization::for_kind(Kind::Points2d);
+        card.test_symmetries = vec![Symmetry::Reverse];
+        assert!(
+            card.validate()
+                .unwrap_err()
+                .contains("does not apply to points2d")
+        );
+        card.test_symmetries = vec![Symmetry::Mirror];
+        card.validate().unwrap();
+    }
+
+}
