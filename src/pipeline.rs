@@ -282,12 +282,15 @@ pub fn refine(
     clustering: &Clustering,
     params: &RefineParams,
 ) -> Refined {
+    // A K the caller gave is kept: structures merge only when K was chosen.
+    let merge = !matches!(clustering.selection, Selection::Fixed(_));
     refine::refine(
         points,
         &clustering.labels,
         clustering.k,
         model.card.family(),
         params,
+        merge,
     )
 }
 

@@ -21,8 +21,9 @@
 //! trained with outliers as one more group learn (AdelaideRMF), and it is dissolved: its points go
 //! to a structure they fit, or become outliers.
 //!
-//! **Merging.** Two structures whose union one model of the same family fits with a noise level
-//! within [`MERGE_SIGMAS`] × σ are one structure seen twice (K chosen too high), and merge.
+//! **Merging.** When K was chosen automatically, two structures whose union one model of the
+//! same family fits with a noise level within [`MERGE_SIGMAS`] × σ are one structure seen twice
+//! (K chosen too high), and merge. A K the caller gave is kept.
 //!
 //! Groups whose model is degenerate (too few or collinear points) keep their learned points and
 //! never take others'.
@@ -101,7 +102,7 @@ struct Group {
 }
 
 /// Refines a clustering of `points` (`labels` in 0..k, one per row) into structures of
-/// `family`: `points` `[n, d]`, labels `[n]` -> labels `[n]` (−1 for outliers) and one model per
+/// `family`, merging structures that are one when `merge_structures`: `points` `[n, d]`, labels `[n]` -> labels `[n]` (−1 for outliers) and one model per
 /// remaining label.
 pub fn refine(
     points: &PointSet,
@@ -109,6 +110,7 @@ pub fn refine(
     k: usize,
     family: Family,
     params: &RefineParams,
+    merge_structures: bool,
 ) -> Refined {
     let n = points.len();
     let members = |labels: &[i64], j: usize| -> Vec<usize> {
@@ -169,7 +171,9 @@ pub fn refine(
             break;
         }
     }
-    merge(points, &mut current, &mut groups, family, sigma);
+    if merge_structures {
+        merge(points, &mut current, &mut groups, family, sigma);
+    }
     // Points of dropped groups that the last round did not move.
     let current = assign(points, &current, &groups, params.outliers, threshold);
     answer(points, current, groups, sigma)
@@ -353,7 +357,7 @@ mod tests {
         for l in start.iter_mut().step_by(2).take(10) {
             *l = 1;
         }
-        let r = refine(&points, &start, 2, Family::Curves, &RefineParams::default());
+        let r = refine(&points, &start, 2, Family::Curves, &RefineParams::default(), true);
         let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
         assert_eq!(r.labels, want);
         assert_eq!(r.structures.len(), 2);
@@ -377,21 +381,21 @@ mod tests {
         let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
         let mut start = truth.clone();
         start.extend([0, 1]);
-        let r = refine(&points, &start, 2, Family::Curves, &RefineParams::default());
+        let r = refine(&points, &start, 2, Family::Curves, &RefineParams::default(), true);
         assert_eq!(&r.labels[80..], &[-1, -1]);
         assert!(r.labels[..80].iter().all(|&l| l >= 0));
         let kept = RefineParams {
             outliers: false,
             threshold: None,
         };
-        let r = refine(&points, &start, 2, Family::Curves, &kept);
+        let r = refine(&points, &start, 2, Family::Curves, &kept, true);
         assert!(r.labels.iter().all(|&l| l >= 0));
         // A caller's threshold in its own units: 100 keeps both far points.
         let wide = RefineParams {
             outliers: true,
             threshold: Some(100.0),
         };
-        let r = refine(&points, &start, 2, Family::Curves, &wide);
+        let r = refine(&points, &start, 2, Family::Curves, &wide, true);
         assert!(r.labels.iter().all(|&l| l >= 0));
     }
 
@@ -404,7 +408,7 @@ mod tests {
             .enumerate()
             .map(|(i, &l)| if l == 0 && i % 4 == 0 { 2 } else { l })
             .collect();
-        let r = refine(&points, &start, 3, Family::Curves, &RefineParams::default());
+        let r = refine(&points, &start, 3, Family::Curves, &RefineParams::default(), true);
         assert_eq!(r.structures.len(), 2);
         let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
         assert_eq!(r.labels, want);
@@ -453,7 +457,7 @@ mod tests {
                     outliers,
                     threshold: None,
                 };
-                let r = refine(&points, &labels, k, family, &params);
+                let r = refine(&points, &labels, k, family, &params, true);
                 assert_eq!(r.labels.len(), points.len(), "{kind} {family:?}");
                 assert!(finite(&r), "{kind} {family:?}: {r:?}");
                 let k = r.structures.len() as i64;

@@ -5,45 +5,14 @@
 mod common;
 
 use std::path::Path;
-use std::process::{Command, Output};
 
-use common::Scratch;
+use common::{Scratch, TINY, ok, run};
 use serde_json::Value;
-
-const TINY: [&str; 10] = [
-    "--width",
-    "16",
-    "--depth",
-    "1",
-    "--embed-dim",
-    "4",
-    "--epochs",
-    "2",
-    "--lr",
-    "1e-3",
-];
 
 fn temp(tag: &str) -> Scratch {
     Scratch::new(&format!("robustness-{tag}"))
 }
 
-fn run(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_multifit-train"))
-        .args(args)
-        .env("RAYON_NUM_THREADS", "1")
-        .output()
-        .expect("run multifit-train")
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = run(args);
-    assert!(
-        out.status.success(),
-        "{args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
 
 fn refused(args: &[&str]) -> String {
     let out = run(args);

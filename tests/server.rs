@@ -81,6 +81,9 @@ fn tracks_of_every_length_are_fitted_with_structures_on_every_frame() {
         assert_eq!(r.status, 200, "{f} frames: {}", r.text());
         let v = r.json();
         assert_eq!(check_fit(&v, cut.len()), v["structures"].as_array().unwrap().len());
+        // kt3dmoseg was validated on 5 to 20 frames: other lengths are answered with a warning.
+        let warned = v["warnings"].as_array().unwrap().iter().any(|w| w.as_str().unwrap().starts_with("frames"));
+        assert_eq!(warned, !(5..=20).contains(&f), "{f} frames: {}", v["warnings"]);
         for s in v["structures"].as_array().unwrap() {
             // Structures are fitted on every frame sent, not only those the network reads.
             assert_eq!(s["type"], "subspace", "{s}");

@@ -335,4 +335,41 @@ mod tests {
         card.validate().unwrap();
     }
 
+
+    #[test]
+    fn a_fit_outside_the_validated_range_names_each_quantity() {
+        let range = ValidatedRange {
+            points: Some([100, 2000]),
+            points_per_structure: Some([20, 500]),
+            frames: Some([5, 20]),
+            image_side: Some([400.0, 1000.0]),
+            outlier_ratio: Some([0.0, 0.5]),
+            source: String::new(),
+        };
+        let inside = Observed {
+            points: 300,
+            points_per_structure: Some([40, 200]),
+            frames: Some(5),
+            image_side: Some(640.0),
+            outlier_ratio: Some(0.1),
+        };
+        assert!(range.warnings(&inside).is_empty());
+        let outside = Observed {
+            points: 50,
+            points_per_structure: Some([3, 900]),
+            frames: Some(29),
+            image_side: Some(4000.0),
+            outlier_ratio: Some(0.75),
+        };
+        let w = range.warnings(&outside);
+        assert_eq!(w.len(), 6, "{w:?}");
+        for name in ["points 50", "smallest structure's points 3", "largest structure's points 900",
+                     "frames 29", "image side 4000", "outlier ratio 0.75"] {
+            assert!(w.iter().any(|m| m.starts_with(name)), "{name}: {w:?}");
+        }
+        // A card without a range never warns.
+        let card = tiny(vec![]).card;
+        assert!(card.warnings(&outside).is_empty());
+    }
+
 }

@@ -367,3 +367,28 @@ pub fn slow_fit_body(seed: u64, per_shape: usize, extra: &[(&str, Value)]) -> (V
     }
     (serde_json::to_vec(&body).unwrap(), rows.len())
 }
+
+/// Flags of a tiny network that trains in seconds.
+pub const TINY: [&str; 10] = [
+    "--width", "16", "--depth", "1", "--embed-dim", "4", "--epochs", "2", "--lr", "1e-3",
+];
+
+/// Runs `multifit-train` with `args` on one thread.
+pub fn run(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_multifit-train"))
+        .args(args)
+        .env("RAYON_NUM_THREADS", "1")
+        .output()
+        .expect("run multifit-train")
+}
+
+/// Runs `multifit-train` with `args`, which must succeed; its standard output.
+pub fn ok(args: &[&str]) -> String {
+    let out = run(args);
+    assert!(
+        out.status.success(),
+        "{args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
