@@ -226,7 +226,7 @@ fn assign(
                 .map(|&(j, m)| (j, m.residual(row)))
                 .min_by(|a, b| a.1.total_cmp(&b.1))
                 .unwrap_or((live[0].0, f64::INFINITY));
-            if outliers && !(r <= threshold) {
+            if outliers && (r.is_nan() || r > threshold) {
                 -1
             } else {
                 j as i64

@@ -54,7 +54,7 @@ pub fn spacing(points: &[f32], dim: usize, k: usize) -> f64 {
 /// neighbours: `None` to read them all, else a sorted seeded random subset.
 pub fn thin(points: &[f32], dim: usize, k: usize, trained: f64, seed: u64) -> Option<Vec<usize>> {
     let n = points.len() / dim.max(1);
-    if !(trained > 0.0) {
+    if trained.is_nan() || trained <= 0.0 {
         return None;
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -69,7 +69,7 @@ pub fn thin(points: &[f32], dim: usize, k: usize, trained: f64, seed: u64) -> Op
             .copied()
             .collect();
         let s = spacing(&subset, dim, k);
-        if !(s > 0.0) || s >= THIN_BELOW * trained {
+        if s.is_nan() || s <= 0.0 || s >= THIN_BELOW * trained {
             break;
         }
         let keep = ((rows.len() as f64 * s / trained).ceil() as usize).clamp(MIN_READ, rows.len());
