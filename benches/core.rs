@@ -121,7 +121,8 @@ fn main() {
     let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/datasets");
     let model = LoadedModel::load(&models.join("adelaide-homography")).expect("shipped model");
     let pair = Sequence::load(&data.join("adelaidermf/bonhall.json")).expect("dataset");
-    let z = model.embed(&multifit::pipeline::prepare(&model, &pair.points, pair.image_size).expect("input"));
+    let z = model
+        .embed(&multifit::pipeline::prepare(&model, &pair.points, pair.image_size).expect("input"));
     for sel in [Selection::Sod, Selection::Silhouette] {
         let p = ClusterParams::builder()
             .k_max(8)

@@ -1,6 +1,6 @@
 //! The fit pipeline: one place that reads in the order a fit runs.
 //!
-//! 1. **normalise** ([`check`], [`frames_read`], [`Normalization`], [`rows_read`]): the input
+//! 1. **normalise** ([`check`], [`frames_read`], [`Normalization`], thinning): the input
 //!    must be the model's kind; tracks of any length F ≥ 2 are read at the model's frame count
 //!    (frames spread over the whole track, or the first ones, as the card says); coordinates are
 //!    mapped into the frame the network was trained in; a set denser than the model's training
@@ -22,9 +22,9 @@ use std::time::Instant;
 
 use crate::cluster::{self, ClusterError, ClusterParams, Clustering, Points, Selection};
 use crate::data::features::with_neighbors;
-use crate::data::{density, frames};
 use crate::data::symmetry::closure;
 use crate::data::{ImageSize, Kind, Normalization, PointSet, Symmetry};
+use crate::data::{density, frames};
 use crate::refine::{self, RefineParams, Refined, Structure};
 use crate::registry::{LoadedModel, Observed};
 
@@ -80,7 +80,6 @@ pub struct FitOutcome {
     pub cluster_ms: f64,
     pub refine_ms: f64,
 }
-
 
 /// Stage 1: the input is of the model's kind and width. Trajectories of any frame count F ≥ 2
 /// pass: [`frames_read`] brings them to the model's.
@@ -144,21 +143,22 @@ pub fn prepare(
     ))
 }
 
-/// Stage 1: the rows of `points` the network reads: `None` for all of them, else a seeded
-/// subset at the density of the model's training sets (cards that record their training
-/// spacing, networks that read neighbours).
-pub fn rows_read(
+/// Stage 1: the rows of the set the network reads, and for every input row its read row:
+/// `None` when every row is read, else a seeded subset at the density of the model's training
+/// sets (cards that record their training spacing). `read` is the set at the model's frames.
+fn rows_read(
     model: &LoadedModel,
-    points: &PointSet,
+    read: &PointSet,
     image: Option<ImageSize>,
     seed: u64,
-) -> Option<Vec<usize>> {
+) -> Option<(Vec<usize>, Vec<usize>)> {
     let card = &model.card;
-    let k = card.architecture.neighbors;
     let trained = card.spacing?;
-    let read = frames_read(model, points);
-    let normalised = card.normalization.apply(&read, image);
-    density::thin(&normalised, read.dim(), k, trained, seed)
+    let normalised = card.normalization.apply(read, image);
+    let k = card.architecture.neighbors;
+    let rows = density::thin(&normalised, read.dim(), k, trained, seed)?;
+    let owner = density::nearest_read(&normalised, read.dim(), &rows);
+    Some((rows, owner))
 }
 
 /// The embeddings of a set: one row per point read.
@@ -188,7 +188,7 @@ impl Embedding {
 }
 
 /// Stage 3: the embeddings a fit clusters: `points` `[n, d]` -> `[m, e * c]` over the m rows
-/// read ([`rows_read`], with `seed`), where c counts the networks (the card's and its members)
+/// read (a set denser than the model's training sets is thinned, with `seed`), where c counts the networks (the card's and its members)
 /// times the images (the input and its images under every combination of `symmetries`). Row i
 /// holds the embeddings of point i by each network of each image (networks vary fastest), side
 /// by side, divided by the square root of c so that it keeps unit length. An image that does
@@ -202,16 +202,9 @@ pub fn embed(
     seed: u64,
 ) -> Result<Embedding, FitError> {
     check(model, points)?;
-    let rows = rows_read(model, points, image, seed);
-    let owner = match &rows {
-        None => None,
-        Some(rows) => {
-            let read = frames_read(model, points);
-            let normalised = model.card.normalization.apply(&read, image);
-            Some(density::nearest_read(&normalised, read.dim(), rows))
-        }
-    };
-    let (values, width) = embed_rows(model, points, rows.as_deref(), image, symmetries)?;
+    let read = frames_read(model, points);
+    let (rows, owner) = rows_read(model, &read, image, seed).unzip();
+    let (values, width) = embed_rows(model, &read, rows.as_deref(), image, symmetries)?;
     Ok(Embedding {
         values,
         width,
@@ -219,19 +212,21 @@ pub fn embed(
     })
 }
 
-/// [`embed`] of the given rows (`None`: all): -> (`[m, width]`, width).
+/// [`embed`] of the given rows (`None`: all) of `read`, the set at the model's frames:
+/// -> (`[m, width]`, width).
 fn embed_rows(
     model: &LoadedModel,
-    points: &PointSet,
+    read: &PointSet,
     rows: Option<&[usize]>,
     image: Option<ImageSize>,
     symmetries: &[Symmetry],
 ) -> Result<(Vec<f32>, usize), FitError> {
     let e = model.card.architecture.embed_dim;
-    let read = frames_read(model, points);
     let read = match rows {
-        Some(rows) => read.select(rows).map_err(|e| FitError::Input(e.to_string()))?,
-        None => read,
+        Some(rows) => read
+            .select(rows)
+            .map_err(|e| FitError::Input(e.to_string()))?,
+        None => read.clone(),
     };
     let m = read.len();
     let images = if symmetries.is_empty() {
@@ -472,7 +467,6 @@ pub(crate) mod tests {
         assert_eq!(fit.embeddings.len(), 3 * 3);
     }
 
-
     #[test]
     fn trajectory_models_read_tracks_of_any_length() {
         let model = tiny(vec![]);
@@ -482,7 +476,14 @@ pub(crate) mod tests {
         let values = (0..points.len())
             .flat_map(|i| {
                 let r = points.row(i);
-                [r[0], r[1], (r[0] + r[2]) / 2.0, (r[1] + r[3]) / 2.0, r[2], r[3]]
+                [
+                    r[0],
+                    r[1],
+                    (r[0] + r[2]) / 2.0,
+                    (r[1] + r[3]) / 2.0,
+                    r[2],
+                    r[3],
+                ]
             })
             .collect();
         let longer = PointSet::from_flat(Kind::Trajectories, 6, values).unwrap();

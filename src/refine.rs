@@ -288,7 +288,9 @@ fn answer(points: &PointSet, current: Vec<i64>, groups: Vec<Option<Group>>, sigm
     let mut structures = Vec::new();
     for (j, g) in groups.into_iter().enumerate() {
         let Some(g) = g else { continue };
-        let idx: Vec<usize> = (0..points.len()).filter(|&i| current[i] == j as i64).collect();
+        let idx: Vec<usize> = (0..points.len())
+            .filter(|&i| current[i] == j as i64)
+            .collect();
         if idx.is_empty() {
             continue;
         }
@@ -297,7 +299,10 @@ fn answer(points: &PointSet, current: Vec<i64>, groups: Vec<Option<Group>>, sigm
         let rms = if g.frozen {
             0.0
         } else {
-            let ss: f64 = idx.iter().map(|&i| g.fit.model.residual(points.row(i)).powi(2)).sum();
+            let ss: f64 = idx
+                .iter()
+                .map(|&i| g.fit.model.residual(points.row(i)).powi(2))
+                .sum();
             (ss / idx.len() as f64).sqrt()
         };
         structures.push(Structure {
@@ -357,7 +362,14 @@ mod tests {
         for l in start.iter_mut().step_by(2).take(10) {
             *l = 1;
         }
-        let r = refine(&points, &start, 2, Family::Curves, &RefineParams::default(), true);
+        let r = refine(
+            &points,
+            &start,
+            2,
+            Family::Curves,
+            &RefineParams::default(),
+            true,
+        );
         let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
         assert_eq!(r.labels, want);
         assert_eq!(r.structures.len(), 2);
@@ -381,7 +393,14 @@ mod tests {
         let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
         let mut start = truth.clone();
         start.extend([0, 1]);
-        let r = refine(&points, &start, 2, Family::Curves, &RefineParams::default(), true);
+        let r = refine(
+            &points,
+            &start,
+            2,
+            Family::Curves,
+            &RefineParams::default(),
+            true,
+        );
         assert_eq!(&r.labels[80..], &[-1, -1]);
         assert!(r.labels[..80].iter().all(|&l| l >= 0));
         let kept = RefineParams {
@@ -408,7 +427,14 @@ mod tests {
             .enumerate()
             .map(|(i, &l)| if l == 0 && i % 4 == 0 { 2 } else { l })
             .collect();
-        let r = refine(&points, &start, 3, Family::Curves, &RefineParams::default(), true);
+        let r = refine(
+            &points,
+            &start,
+            3,
+            Family::Curves,
+            &RefineParams::default(),
+            true,
+        );
         assert_eq!(r.structures.len(), 2);
         let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
         assert_eq!(r.labels, want);
@@ -418,14 +444,30 @@ mod tests {
     fn degenerate_and_tiny_groups_never_give_nan_or_panic() {
         let cases: Vec<(Kind, usize, Vec<f64>, Vec<usize>, usize, Family)> = vec![
             // Two points, two groups.
-            (Kind::Points2d, 2, vec![0.0, 0.0, 1.0, 1.0], vec![0, 1], 2, Family::Curves),
+            (
+                Kind::Points2d,
+                2,
+                vec![0.0, 0.0, 1.0, 1.0],
+                vec![0, 1],
+                2,
+                Family::Curves,
+            ),
             // Coincident points.
-            (Kind::Points2d, 2, vec![3.0; 20], vec![0; 10], 1, Family::Curves),
+            (
+                Kind::Points2d,
+                2,
+                vec![3.0; 20],
+                vec![0; 10],
+                1,
+                Family::Curves,
+            ),
             // Collinear correspondences, too few for F.
             (
                 Kind::Correspondences,
                 4,
-                (0..5).flat_map(|i| [i as f64, 0.0, i as f64 + 1.0, 0.0]).collect(),
+                (0..5)
+                    .flat_map(|i| [i as f64, 0.0, i as f64 + 1.0, 0.0])
+                    .collect(),
                 vec![0, 0, 0, 1, 1],
                 2,
                 Family::Fundamental,
@@ -433,13 +475,22 @@ mod tests {
             (
                 Kind::Correspondences,
                 4,
-                (0..6).flat_map(|i| [i as f64, 2.0 * i as f64, 1.0, 1.0]).collect(),
+                (0..6)
+                    .flat_map(|i| [i as f64, 2.0 * i as f64, 1.0, 1.0])
+                    .collect(),
                 vec![0; 6],
                 1,
                 Family::Homography,
             ),
             // Identical tracks.
-            (Kind::Trajectories, 6, vec![1.0; 30], vec![0, 0, 1, 1, 1], 2, Family::Subspace),
+            (
+                Kind::Trajectories,
+                6,
+                vec![1.0; 30],
+                vec![0, 0, 1, 1, 1],
+                2,
+                Family::Subspace,
+            ),
             // Huge values.
             (
                 Kind::Points2d,

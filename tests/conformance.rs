@@ -24,10 +24,7 @@ fn schemathesis_finds_no_failure() {
             "conformance did not run under CI: {skip}"
         );
         // Straight to stderr, past the test harness's capture, so that the line shows.
-        let _ = writeln!(
-            std::io::stderr(),
-            "tests/conformance.rs: NOT RUN: {skip}"
-        );
+        let _ = writeln!(std::io::stderr(), "tests/conformance.rs: NOT RUN: {skip}");
         return;
     }
     assert!(

@@ -43,7 +43,8 @@ fn fused_forward_matches_burn_on_every_shipped_model() {
         let model = LoadedModel::load(&dir).unwrap();
         let name = model.card.name.clone();
         for sample in samples(model.card.kind) {
-            let input = multifit::pipeline::prepare(&model, &sample.points, sample.image_size).unwrap();
+            let input =
+                multifit::pipeline::prepare(&model, &sample.points, sample.image_size).unwrap();
             let burn = model.embed_burn(&input);
             for threads in [1, 2] {
                 let model = LoadedModel::load(&dir)

@@ -481,14 +481,17 @@ fn cases() -> Vec<Case> {
     fit(
         &mut cases,
         "trajectories, 2 and 4 frames for the 5-frame model",
-        br#"{"kind":"trajectories","points":[[0,0,1,1],[1,1,2,2],[5,5,5,6]],"refine":true}"#.to_vec(),
+        br#"{"kind":"trajectories","points":[[0,0,1,1],[1,1,2,2],[5,5,5,6]],"refine":true}"#
+            .to_vec(),
         Fit(3),
     );
     fit(
         &mut cases,
         "trajectories of 40 identical frames, refined",
-        serde_json::to_vec(&json!({"kind": "trajectories", "points": [vec![3.0; 80], vec![3.0; 80], vec![4.0; 80]],
-                                   "refine": true, "k": 2}))
+        serde_json::to_vec(
+            &json!({"kind": "trajectories", "points": [vec![3.0; 80], vec![3.0; 80], vec![4.0; 80]],
+                                   "refine": true, "k": 2}),
+        )
         .unwrap(),
         Fit(3),
     );
@@ -1304,7 +1307,11 @@ fn check_fit_value(case: &str, v: &Value, n: usize) -> Vec<i64> {
         "{case}: labels in -1..k: {l:?}"
     );
     let outliers = l.iter().filter(|&&x| x < 0).count();
-    assert_eq!(v["outliers"].as_u64(), Some(outliers as u64), "{case}: outliers");
+    assert_eq!(
+        v["outliers"].as_u64(),
+        Some(outliers as u64),
+        "{case}: outliers"
+    );
     let structures = v["structures"]
         .as_array()
         .unwrap_or_else(|| panic!("{case}: no structures: {v}"));
@@ -1312,9 +1319,14 @@ fn check_fit_value(case: &str, v: &Value, n: usize) -> Vec<i64> {
         assert_eq!(structures.len(), k, "{case}: one structure per label");
         for (i, s) in structures.iter().enumerate() {
             assert_eq!(s["label"].as_u64(), Some(i as u64), "{case}: structure {i}");
-            let rms = s["rms"].as_f64().unwrap_or_else(|| panic!("{case}: rms {s}"));
+            let rms = s["rms"]
+                .as_f64()
+                .unwrap_or_else(|| panic!("{case}: rms {s}"));
             assert!(rms.is_finite() && rms >= 0.0, "{case}: rms {rms}");
-            assert!(!s.to_string().contains("null"), "{case}: a null parameter: {s}");
+            assert!(
+                !s.to_string().contains("null"),
+                "{case}: a null parameter: {s}"
+            );
         }
     }
     let sizes: Vec<usize> = v["cluster_sizes"]

@@ -129,7 +129,9 @@ fn fit_response_fields_match_the_schema() {
             rms: 0.1,
         }],
         outliers: 0,
-        warnings: vec!["points 2 is outside the range the model was validated on (100 to 200)".into()],
+        warnings: vec![
+            "points 2 is outside the range the model was validated on (100 to 200)".into(),
+        ],
         embeddings: Some(vec![vec![1.0, 0.0], vec![0.0, 1.0]]),
         timing_ms: Timing {
             embed: 1.0,

@@ -13,7 +13,6 @@ fn temp(tag: &str) -> Scratch {
     Scratch::new(&format!("robustness-{tag}"))
 }
 
-
 fn refused(args: &[&str]) -> String {
     let out = run(args);
     let err = String::from_utf8_lossy(&out.stderr).into_owned();

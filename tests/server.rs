@@ -73,17 +73,34 @@ fn tracks_of_every_length_are_fitted_with_structures_on_every_frame() {
     for f in [2, 3, 8, frames] {
         let cut: Vec<Vec<f64>> = rows
             .iter()
-            .map(|r| r.as_array().unwrap()[..2 * f].iter().map(|x| x.as_f64().unwrap()).collect())
+            .map(|r| {
+                r.as_array().unwrap()[..2 * f]
+                    .iter()
+                    .map(|x| x.as_f64().unwrap())
+                    .collect()
+            })
             .collect();
         let body = json!({"kind": "trajectories", "points": cut, "image_size": file["image_size"],
                           "k": 2, "refine": true, "outliers": false});
         let r = server.post_json("/v1/fit", &body);
         assert_eq!(r.status, 200, "{f} frames: {}", r.text());
         let v = r.json();
-        assert_eq!(check_fit(&v, cut.len()), v["structures"].as_array().unwrap().len());
+        assert_eq!(
+            check_fit(&v, cut.len()),
+            v["structures"].as_array().unwrap().len()
+        );
         // kt3dmoseg was validated on 5 to 20 frames: other lengths are answered with a warning.
-        let warned = v["warnings"].as_array().unwrap().iter().any(|w| w.as_str().unwrap().starts_with("frames"));
-        assert_eq!(warned, !(5..=20).contains(&f), "{f} frames: {}", v["warnings"]);
+        let warned = v["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w.as_str().unwrap().starts_with("frames"));
+        assert_eq!(
+            warned,
+            !(5..=20).contains(&f),
+            "{f} frames: {}",
+            v["warnings"]
+        );
         for s in v["structures"].as_array().unwrap() {
             // Structures are fitted on every frame sent, not only those the network reads.
             assert_eq!(s["type"], "subspace", "{s}");

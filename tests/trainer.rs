@@ -12,7 +12,6 @@ fn temp(tag: &str) -> Scratch {
     Scratch::new(&format!("trainer-{tag}"))
 }
 
-
 /// Copies some dataset files into a fresh directory.
 fn subset(tag: &str, dir: &str, names: &[&str]) -> Scratch {
     let to = temp(tag);

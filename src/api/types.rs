@@ -9,8 +9,8 @@ use super::error::{ApiError, ErrorCode};
 use crate::cluster::{ClusterParams, Clustering, Selection};
 use crate::data::{ImageSize, Kind, PointSet};
 use crate::geometry::Model;
-use crate::refine::RefineParams;
 use crate::pipeline::FitOutcome;
+use crate::refine::RefineParams;
 use crate::registry::LoadedModel;
 
 /// Request limits, from the server config.
@@ -201,7 +201,11 @@ impl FitRequest {
                 ));
             }
         };
-        let refine = match (self.refine.unwrap_or(model.card.refine), self.outliers, self.outlier_threshold) {
+        let refine = match (
+            self.refine.unwrap_or(model.card.refine),
+            self.outliers,
+            self.outlier_threshold,
+        ) {
             (false, None, None) => None,
             (false, _, _) => {
                 return Err(ApiError::new(

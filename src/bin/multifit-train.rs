@@ -8,16 +8,16 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
+use multifit::data::frames::FrameSampling;
 use multifit::data::synthetic::{LceConfig, LceSpec, LceVariant, parse_range};
 use multifit::data::{DataSource, Kind, Normalization, Sample, Sequence, Symmetry};
 use multifit::loss::Loss;
 use multifit::model::ModelConfig;
+use multifit::refine::RefineParams;
 use multifit::registry::{
     LoadedModel, MetricRecord, ModelCard, TrainingInfo, WEIGHTS_FILE, card_for, write_ensemble,
 };
 use multifit::train::cv::{self, CvSpec, Protocol, SamplePlan};
-use multifit::data::frames::FrameSampling;
-use multifit::refine::RefineParams;
 use multifit::train::eval::{EvalSettings, evaluate_sample, format_table, totals};
 use multifit::train::{EpochLog, Hooks, Schedule, TrainConfig, prepare, train};
 
@@ -618,7 +618,14 @@ fn train_cmd(a: TrainCmd) -> Result<()> {
         seconds: outcome.seconds,
         machine: machine(),
     };
-    let mut card = card_for(&a.name, kind, &config.model, config.loss, a.train.k_max, info);
+    let mut card = card_for(
+        &a.name,
+        kind,
+        &config.model,
+        config.loss,
+        a.train.k_max,
+        info,
+    );
     card.test_symmetries = a.train.test_symmetry.clone();
     card.git_commit = git_commit();
     if let Some(v) = outcome.best_val_error {
@@ -710,11 +717,16 @@ fn eval_cmd(a: EvalCmd) -> Result<()> {
     let frames = a.frames.unwrap_or(FrameCount::N(model.card.input_dim / 2));
     let samples = eval_samples(&seqs, frames, a.stride as usize);
     if samples.is_empty() {
-        bail!("no sequence has a test clip of {frames:?} frames at stride {}", a.stride);
+        bail!(
+            "no sequence has a test clip of {frames:?} frames at stride {}",
+            a.stride
+        );
     }
     let refine = a.refine.map_or(model.card.refine, |r| r == Switch::On);
     if a.record.is_some() && (refine != model.card.refine || a.frames.is_some() || a.stride != 1) {
-        bail!("--record stores a metric of the model as served: drop --refine, --frames and --stride");
+        bail!(
+            "--record stores a metric of the model as served: drop --refine, --frames and --stride"
+        );
     }
     let settings = EvalSettings {
         k_max: a.k_max,

@@ -1,8 +1,8 @@
 //! The silhouette of a labelling: exact up to [`super::SILHOUETTE_EXACT_MAX`] points, else on a
 //! seeded sample.
 
-use rand::{RngExt, SeedableRng};
 use rand::rngs::ChaCha8Rng;
+use rand::{RngExt, SeedableRng};
 
 use super::{Points, SILHOUETTE_EXACT_MAX};
 use crate::threads::Threads;

@@ -174,7 +174,9 @@ impl Sequence {
             .iter()
             .flat_map(|&i| {
                 let row = self.points.row(i);
-                frames.iter().flat_map(move |&f| [row[2 * f], row[2 * f + 1]])
+                frames
+                    .iter()
+                    .flat_map(move |&f| [row[2 * f], row[2 * f + 1]])
             })
             .collect();
         let points = PointSet::from_flat(Kind::Trajectories, 2 * len, values).ok()?;

@@ -38,7 +38,10 @@ pub fn spacing(points: &[f32], dim: usize, k: usize) -> f64 {
     let mut d: Vec<f64> = (0..n)
         .map(|i| {
             let j = nearest[i * k + k - 1];
-            let (p, q) = (&points[i * dim..(i + 1) * dim], &points[j * dim..(j + 1) * dim]);
+            let (p, q) = (
+                &points[i * dim..(i + 1) * dim],
+                &points[j * dim..(j + 1) * dim],
+            );
             p.iter()
                 .zip(q)
                 .map(|(a, b)| f64::from(a - b).powi(2))
@@ -104,7 +107,11 @@ pub fn nearest_read(points: &[f32], dim: usize, read: &[usize]) -> Vec<usize> {
                 if dx * dx > best.0 {
                     return false;
                 }
-                let d: f32 = p.iter().zip(row(read[a])).map(|(u, v)| (u - v) * (u - v)).sum();
+                let d: f32 = p
+                    .iter()
+                    .zip(row(read[a]))
+                    .map(|(u, v)| (u - v) * (u - v))
+                    .sum();
                 if d < best.0 || (d == best.0 && a < best.1) {
                     best = (d, a);
                 }
@@ -160,7 +167,10 @@ mod tests {
         // Within the tolerance: read whole.
         assert_eq!(thin(&circle(120), 2, 4, trained, 7), None);
         // Never below the floor.
-        assert_eq!(thin(&dense, 2, 4, trained * 100.0, 7).unwrap().len(), MIN_READ);
+        assert_eq!(
+            thin(&dense, 2, 4, trained * 100.0, 7).unwrap().len(),
+            MIN_READ
+        );
         // No trained spacing, or a degenerate one: read whole.
         assert_eq!(thin(&dense, 2, 4, 0.0, 7), None);
         assert_eq!(thin(&dense, 2, 4, f64::NAN, 7), None);
@@ -173,7 +183,9 @@ mod tests {
         let got = nearest_read(&pts, 2, &read);
         for i in 0..150 {
             let d = |a: usize| -> f32 {
-                (0..2).map(|c| (pts[i * 2 + c] - pts[read[a] * 2 + c]).powi(2)).sum()
+                (0..2)
+                    .map(|c| (pts[i * 2 + c] - pts[read[a] * 2 + c]).powi(2))
+                    .sum()
             };
             let best = (0..read.len()).map(d).fold(f32::INFINITY, f32::min);
             assert_eq!(d(got[i]), best, "row {i}");

@@ -85,7 +85,10 @@ mod tests {
     fn spread_reads_the_first_and_last_frames_and_evenly_between() {
         let p = resample(&tracks(2, 29), 5, FrameSampling::Spread);
         assert_eq!(p.dim(), 10);
-        assert_eq!(p.row(1), &[100., 0., 107., -7., 114., -14., 121., -21., 128., -28.]);
+        assert_eq!(
+            p.row(1),
+            &[100., 0., 107., -7., 114., -14., 121., -21., 128., -28.]
+        );
     }
 
     #[test]
@@ -99,7 +102,10 @@ mod tests {
         // Two frames read as five: times 0, 0.25, 0.5, 0.75, 1.
         for sampling in [FrameSampling::Spread, FrameSampling::First] {
             let p = resample(&tracks(2, 2), 5, sampling);
-            assert_eq!(p.row(0), &[0., 0., 0.25, -0.25, 0.5, -0.5, 0.75, -0.75, 1., -1.]);
+            assert_eq!(
+                p.row(0),
+                &[0., 0., 0.25, -0.25, 0.5, -0.5, 0.75, -0.75, 1., -1.]
+            );
         }
     }
 

@@ -7,10 +7,10 @@ use serde::{Deserialize, Serialize};
 
 use super::RegistryError;
 use crate::cluster::Selection;
-use crate::data::symmetry;
 use crate::data::frames::FrameSampling;
-use crate::geometry::Family;
+use crate::data::symmetry;
 use crate::data::{Kind, Normalization, Symmetry};
+use crate::geometry::Family;
 use crate::loss::Loss;
 use crate::model::ModelConfig;
 
@@ -335,7 +335,6 @@ mod tests {
         card.validate().unwrap();
     }
 
-
     #[test]
     fn a_fit_outside_the_validated_range_names_each_quantity() {
         let range = ValidatedRange {
@@ -363,13 +362,18 @@ mod tests {
         };
         let w = range.warnings(&outside);
         assert_eq!(w.len(), 6, "{w:?}");
-        for name in ["points 50", "smallest structure's points 3", "largest structure's points 900",
-                     "frames 29", "image side 4000", "outlier ratio 0.75"] {
+        for name in [
+            "points 50",
+            "smallest structure's points 3",
+            "largest structure's points 900",
+            "frames 29",
+            "image side 4000",
+            "outlier ratio 0.75",
+        ] {
             assert!(w.iter().any(|m| m.starts_with(name)), "{name}: {w:?}");
         }
         // A card without a range never warns.
         let card = tiny(vec![]).card;
         assert!(card.warnings(&outside).is_empty());
     }
-
 }

@@ -12,8 +12,8 @@ use std::path::PathBuf;
 use crate::model::ModelError;
 
 pub use card::{
-    CARD_FILE, Member, MetricRecord, ModelCard, Observed, TrainingInfo, ValidatedRange, WEIGHTS_FILE,
-    card_for,
+    CARD_FILE, Member, MetricRecord, ModelCard, Observed, TrainingInfo, ValidatedRange,
+    WEIGHTS_FILE, card_for,
 };
 pub use ensemble::write_ensemble;
 pub use load::{LoadedModel, load_all};
@@ -82,7 +82,6 @@ pub(crate) mod tests {
         LoadedModel::from_parts(card, net, device).unwrap()
     }
 
-
     /// A fresh directory (`multifit-<tag>-XXXXXX` in the system temp dir), removed when dropped.
     pub(crate) fn scratch(tag: &str) -> TempDir {
         tempfile::Builder::new()
@@ -104,5 +103,4 @@ pub(crate) mod tests {
         save(&b, &dirs[1]);
         (a, b, dirs)
     }
-
 }

@@ -138,7 +138,6 @@ pub fn finished_fold(out: &Path, name: &str) -> Option<FoldResult> {
     serde_json::from_str(&text).ok()
 }
 
-
 /// Trains on every sequence but `held_out` and evaluates on `held_out`'s test sample.
 /// Writes the result to `<out>/folds/<name>.json`; returns the saved result when it exists.
 pub fn run_fold(

@@ -21,11 +21,11 @@ use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
 use crate::cluster::{ClusterParams, Points, Selection, cluster};
-use crate::pipeline::network_input;
 use crate::data::{Normalization, Sample};
 use crate::loss::{Loss, one_hot};
 use crate::metrics::error_rate;
 use crate::model::{EmbeddingNet, ModelConfig, ModelError, cpu_device};
+use crate::pipeline::network_input;
 
 /// Learning-rate schedule over the epochs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

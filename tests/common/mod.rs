@@ -370,7 +370,16 @@ pub fn slow_fit_body(seed: u64, per_shape: usize, extra: &[(&str, Value)]) -> (V
 
 /// Flags of a tiny network that trains in seconds.
 pub const TINY: [&str; 10] = [
-    "--width", "16", "--depth", "1", "--embed-dim", "4", "--epochs", "2", "--lr", "1e-3",
+    "--width",
+    "16",
+    "--depth",
+    "1",
+    "--embed-dim",
+    "4",
+    "--epochs",
+    "2",
+    "--lr",
+    "1e-3",
 ];
 
 /// Runs `multifit-train` with `args` on one thread.
