@@ -1,6 +1,6 @@
 //! Core benchmarks: network forward (burn, fused serving path, and the bare matrix multiplies of
-//! the same shapes as the floor), k-means with K selection, the whole fit of a shipped model, and
-//! training steps.
+//! the same shapes as the floor), k-means with K selection, the whole fit of a shipped model,
+//! geometric refinement, the SVG picture of a fit, and training steps.
 //! Run: `cargo bench --bench core` (add `-- quick` for fewer repetitions). Prints medians.
 
 use std::time::Instant;
@@ -8,11 +8,15 @@ use std::time::Instant;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::prelude::*;
 use multifit::cluster::{ClusterParams, Points, Selection, cluster};
+use multifit::data::synthetic::{LceConfig, LceGenerator, LceVariant};
 use multifit::data::{ImageSize, Kind, PointSet, Sequence};
+use multifit::geometry::Family;
 use multifit::loss::{Loss, one_hot};
 use multifit::model::gemm::matmul;
 use multifit::model::{FusedNet, ModelConfig, cpu_device};
+use multifit::refine::{RefineParams, refine};
 use multifit::registry::LoadedModel;
+use multifit::render::{Picture, fit_svg};
 use multifit::threads::Threads;
 use rayon::prelude::*;
 
@@ -206,6 +210,130 @@ fn main() {
             );
         }
     }
+
+    // Refinement at N = 1000, started from the true groups (the reassignment rounds and every
+    // refit run as in a fit): 4 LCE shapes of 250 points; 4 planes of correspondences; 4 motions
+    // of 20-frame tracks.
+    let mut lce = LceGenerator::new(
+        5,
+        LceConfig {
+            points_per_shape: 250,
+            scale: 2.0,
+            ..LceConfig::default()
+        },
+    );
+    let curves = lce.sample(LceVariant::Mixed, "bench").sample;
+    let planes: Vec<Vec<f64>> = (0..1000)
+        .map(|i| {
+            let g = (i % 4) as f64;
+            let r = pseudo(3, i);
+            let (x, y) = (
+                f64::from(r[0]) * 400.0 + 500.0,
+                f64::from(r[1]) * 300.0 + 400.0,
+            );
+            let w = 1.0 + 1e-4 * g * x;
+            vec![
+                x,
+                y,
+                (x * (1.0 + 0.05 * g) + 20.0 * g) / w,
+                (y + 10.0 * g * g) / w + 0.5 * f64::from(r[2]),
+            ]
+        })
+        .collect();
+    let tracks: Vec<Vec<f64>> = (0..1000)
+        .map(|i| {
+            let g = (i % 4) as f64;
+            let r = pseudo(3, i + 5000);
+            let (x, y, z) = (
+                f64::from(r[0]) * 5.0,
+                f64::from(r[1]) * 5.0,
+                f64::from(r[2]) + 10.0,
+            );
+            (0..20)
+                .flat_map(|f| {
+                    let (a, t) = (0.01 * f as f64 * (g + 1.0), 0.2 * f as f64 * g);
+                    let (xr, zr) = (x * a.cos() + z * a.sin() + t, -x * a.sin() + z * a.cos());
+                    [500.0 * xr / zr + 600.0, 500.0 * y / zr + 200.0]
+                })
+                .collect()
+        })
+        .collect();
+    let sets = [
+        (
+            "lce shapes, curves",
+            curves.points.clone(),
+            curves.labels.clone(),
+            Family::Curves,
+        ),
+        (
+            "planes, homography",
+            PointSet::from_rows(Kind::Correspondences, &planes).expect("points"),
+            (0..1000).map(|i| i % 4).collect(),
+            Family::Homography,
+        ),
+        (
+            "20-frame tracks, subspace",
+            PointSet::from_rows(Kind::Trajectories, &tracks).expect("points"),
+            (0..1000).map(|i| i % 4).collect(),
+            Family::Subspace,
+        ),
+    ];
+    for (name, points, labels, family) in &sets {
+        let k = labels.iter().max().map_or(0, |m| m + 1);
+        let ms = median_ms(reps, || {
+            std::hint::black_box(refine(
+                points,
+                labels,
+                k,
+                *family,
+                &RefineParams::default(),
+                true,
+            ));
+        });
+        println!("refine   N={:>5}  {name:<26}: {ms:>8.2} ms", points.len());
+    }
+
+    // The SVG picture of a 20000-point fit with four circle structures and a residual curve.
+    let mut big = LceGenerator::new(
+        6,
+        LceConfig {
+            points_per_shape: 5000,
+            ..LceConfig::default()
+        },
+    );
+    let sample = big.sample(LceVariant::Mixed, "bench").sample;
+    let labels: Vec<i64> = sample.labels.iter().map(|&l| l as i64).collect();
+    let fitted = refine(
+        &sample.points,
+        &sample.labels,
+        4,
+        Family::Curves,
+        &RefineParams::default(),
+        false,
+    );
+    let structures: Vec<(usize, &multifit::geometry::Model)> = fitted
+        .structures
+        .iter()
+        .map(|s| (s.label, &s.model))
+        .collect();
+    let residuals: Vec<(usize, f64)> = (1..=6).map(|k| (k, 1.0 / k as f64)).collect();
+    let ms = median_ms(reps, || {
+        std::hint::black_box(fit_svg(&Picture {
+            title: "lce · K = 4 (sod)".into(),
+            points: &sample.points,
+            image_size: None,
+            labels: &labels,
+            structures: &structures,
+            residuals: &residuals,
+            scores: &residuals,
+            k: 4,
+            selection: "sod",
+        }));
+    });
+    println!(
+        "render   N={:>5}  SVG picture of a fit       : {ms:>8.2} ms",
+        sample.points.len()
+    );
 
     let ad = device.clone().autodiff();
     ad.seed(0);

@@ -1,5 +1,5 @@
 //! Clustering metrics: classification error under the best label matching, normalised mutual
-//! information, and the model-selection correct rate.
+//! information, the model-selection correct rate, and how well outliers (−1) were found.
 
 use pathfinding::prelude::{Matrix, kuhn_munkres};
 
@@ -82,6 +82,37 @@ pub fn model_selection_rate(pairs: &[(usize, usize)]) -> f64 {
     pairs.iter().filter(|(t, c)| t == c).count() as f64 / pairs.len() as f64
 }
 
+/// How well the points answered −1 match the true outliers.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct OutlierScore {
+    /// Of the points answered −1, the share that are true outliers (1 when none was answered).
+    pub precision: f64,
+    /// Of the true outliers, the share answered −1 (1 when there are none).
+    pub recall: f64,
+}
+
+/// Outlier precision and recall: `outlier[i]` says whether point i is a true outlier, `answer`
+/// is the fit's labels (negative = outlier).
+pub fn outlier_score(outlier: &[bool], answer: &[i64]) -> OutlierScore {
+    assert_eq!(
+        outlier.len(),
+        answer.len(),
+        "label vectors differ in length"
+    );
+    let flagged = answer.iter().filter(|&&l| l < 0).count();
+    let truth = outlier.iter().filter(|&&o| o).count();
+    let hits = outlier
+        .iter()
+        .zip(answer)
+        .filter(|&(&o, &l)| o && l < 0)
+        .count();
+    let share = |a: usize, b: usize| if b == 0 { 1.0 } else { a as f64 / b as f64 };
+    OutlierScore {
+        precision: share(hits, flagged),
+        recall: share(hits, truth),
+    }
+}
+
 /// Mean and median of a list of values (NaN for an empty list).
 pub fn mean_median(values: &[f64]) -> (f64, f64) {
     if values.is_empty() {
@@ -102,6 +133,20 @@ pub fn mean_median(values: &[f64]) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn outlier_score_by_hand() {
+        let truth = [true, true, false, false, false];
+        let s = outlier_score(&truth, &[-1, 0, -1, 1, 1]);
+        assert_eq!((s.precision, s.recall), (0.5, 0.5));
+        let s = outlier_score(&truth, &[-1, -1, 0, 1, 1]);
+        assert_eq!((s.precision, s.recall), (1.0, 1.0));
+        // Nothing flagged, nothing to find.
+        let s = outlier_score(&[false, false], &[0, 1]);
+        assert_eq!((s.precision, s.recall), (1.0, 1.0));
+        let s = outlier_score(&truth, &[0, 0, 1, 1, 1]);
+        assert_eq!((s.precision, s.recall), (1.0, 0.0));
+    }
 
     #[test]
     fn error_rate_by_hand() {

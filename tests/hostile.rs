@@ -8,7 +8,7 @@
 //! (including unknown fields: `FitRequest` is `deny_unknown_fields`, `additionalProperties: false`).
 //! Codes: src/api/error.rs and src/api/types.rs.
 //!
-//! The server runs with its default limits (16 MiB body, 20000 points, 500 frames, k_max <= 20,
+//! The server runs with its default limits (64 MiB body, 20000 points, 500 frames, k_max <= 20,
 //! 32 requests per batch), so the battery also checks the documented defaults.
 //!
 //! The error table of single requests, without a process, is in src/api/tests.rs.
@@ -884,7 +884,7 @@ fn cases() -> Vec<Case> {
         Error(422, "invalid_points"),
     );
 
-    // ---- Size limits (defaults: 20000 points, 16 MiB body).
+    // ---- Size limits (defaults: 20000 points, 64 MiB body).
     fit(
         &mut cases,
         "20001 points (one over --max-points)",
@@ -908,25 +908,43 @@ fn cases() -> Vec<Case> {
     );
     fit(
         &mut cases,
-        "17 MiB body (just over --body-limit)",
-        body_of_size(17 << 20),
+        "20000 tracks of 100 frames (about 30 MB) are read, not refused for size",
+        {
+            let mut s = String::from(r#"{"kind":"trajectories","k":0,"points":["#);
+            for i in 0..20_000 {
+                s.push_str(if i > 0 { ",[" } else { "[" });
+                for f in 0..100 {
+                    let sep = if f > 0 { "," } else { "" };
+                    let _ = write!(s, "{sep}{:.3},{:.3}", 100.5 + f as f64, 200.25 + i as f64 * 0.01);
+                }
+                s.push(']');
+            }
+            s.push_str("]}");
+            s.into_bytes()
+        },
+        Error(422, "invalid_k"),
+    );
+    fit(
+        &mut cases,
+        "65 MiB body (just over --body-limit)",
+        body_of_size(65 << 20),
         Error(413, "body_too_large"),
     );
     fit(
         &mut cases,
-        "50 MB body",
-        body_of_size(50_000_000),
+        "100 MB body",
+        body_of_size(100_000_000),
         Error(413, "body_too_large"),
     );
     raw(
         &mut cases,
-        "50 MB batch body",
+        "100 MB batch body",
         "POST",
         "/v1/fit/batch",
         JSON,
         {
             let mut b = br#"{"requests":["#.to_vec();
-            b.extend(std::iter::repeat_n(b' ', 50_000_000));
+            b.extend(std::iter::repeat_n(b' ', 100_000_000));
             b.extend_from_slice(b"]}");
             b
         },
@@ -936,8 +954,8 @@ fn cases() -> Vec<Case> {
     // Without a content-length the limit applies while the body streams in.
     for (name, body, expect) in [
         (
-            "50 MB chunked body",
-            body_of_size(50_000_000),
+            "100 MB chunked body",
+            body_of_size(100_000_000),
             Expect::Error(413, "body_too_large"),
         ),
         (

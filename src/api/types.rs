@@ -202,7 +202,7 @@ impl FitRequest {
             }
         };
         let refine = match (
-            self.refine.unwrap_or(model.card.refine),
+            self.refine.unwrap_or_else(|| model.card.refines(&points)),
             self.outliers,
             self.outlier_threshold,
         ) {

@@ -20,7 +20,7 @@ struct Args {
     #[arg(long, env = "MULTIFIT_MODELS", default_value = "models")]
     models: PathBuf,
     /// Largest request body in bytes.
-    #[arg(long, env = "MULTIFIT_BODY_LIMIT", default_value_t = 16 * 1024 * 1024)]
+    #[arg(long, env = "MULTIFIT_BODY_LIMIT", default_value_t = 64 * 1024 * 1024)]
     body_limit: usize,
     /// Most points (rows) in one fit.
     #[arg(long, env = "MULTIFIT_MAX_POINTS", default_value_t = 20_000)]

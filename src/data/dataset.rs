@@ -5,8 +5,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use super::motion::MotionSpec;
 use super::points::{ImageSize, InputError, Kind, PointSet};
 use super::synthetic::LceSpec;
+use super::twoview::TwoViewSpec;
 
 /// Why a dataset file or directory could not be used. Every variant names the file.
 #[derive(Debug, thiserror::Error)]
@@ -72,6 +74,8 @@ pub struct Sample {
     /// Number of groups in `labels` (structures, plus one when outliers are present).
     pub k: usize,
     pub image_size: Option<ImageSize>,
+    /// Whether label 0 is the gross outliers' group (raw label 0 was present).
+    pub outliers: bool,
 }
 
 impl Sequence {
@@ -145,6 +149,7 @@ impl Sequence {
             labels,
             k,
             image_size: self.image_size,
+            outliers: self.labels.contains(&0),
         }
     }
 
@@ -193,6 +198,7 @@ impl Sequence {
             labels,
             k,
             image_size: self.image_size,
+            outliers: raw.contains(&0),
         })
     }
 
@@ -228,19 +234,28 @@ pub fn renumber(raw: &[i64]) -> (Vec<usize>, usize) {
     (labels, distinct.len())
 }
 
-/// Where labelled sequences come from: a dataset file or directory, or LCE samples generated in
-/// memory (`lce:...`, see [`LceSpec`]). Parsed from a command-line value: anything that does not
-/// start with `lce:` is a path.
+/// Where labelled sequences come from: a dataset file or directory, or samples generated in
+/// memory: LCE (`lce:...`, see [`LceSpec`]), multi-body motion trajectories (`motion:...`, see
+/// [`MotionSpec`]) or two-view correspondences (`twoview:...`, see [`TwoViewSpec`]). Parsed from
+/// a command-line value: anything that does not start with one of those prefixes is a path.
 #[derive(Debug, Clone, PartialEq)]
 pub enum DataSource {
     Path(PathBuf),
     Lce(LceSpec),
+    Motion(MotionSpec),
+    TwoView(TwoViewSpec),
 }
 
 impl std::str::FromStr for DataSource {
     type Err = String;
 
     fn from_str(text: &str) -> Result<Self, String> {
+        if let Some(spec) = text.strip_prefix("motion:") {
+            return spec.parse().map(DataSource::Motion);
+        }
+        if let Some(spec) = text.strip_prefix("twoview:") {
+            return spec.parse().map(DataSource::TwoView);
+        }
         match text.strip_prefix("lce:") {
             Some(spec) => spec.parse().map(DataSource::Lce),
             None if text.is_empty() => Err("empty dataset path".into()),
@@ -254,6 +269,8 @@ impl std::fmt::Display for DataSource {
         match self {
             DataSource::Path(p) => write!(f, "{}", p.display()),
             DataSource::Lce(spec) => write!(f, "{spec}"),
+            DataSource::Motion(spec) => write!(f, "{spec}"),
+            DataSource::TwoView(spec) => write!(f, "{spec}"),
         }
     }
 }
@@ -272,6 +289,25 @@ impl DataSource {
                         path: PathBuf::from(self.to_string()),
                         reason: format!("generated LCE samples have no model type {t:?}"),
                     }),
+                }
+            }
+            DataSource::Motion(spec) => match model_type {
+                None => spec.sequences(),
+                Some(t) => Err(DataError::Invalid {
+                    path: PathBuf::from(self.to_string()),
+                    reason: format!("generated motion samples have no model type {t:?}"),
+                }),
+            },
+            DataSource::TwoView(spec) => {
+                let mode = spec.params.mode.as_str();
+                match model_type {
+                    Some(t) if t != mode => Err(DataError::Invalid {
+                        path: PathBuf::from(self.to_string()),
+                        reason: format!(
+                            "generated two-view samples are of model type {mode:?}, not {t:?}"
+                        ),
+                    }),
+                    _ => spec.sequences(),
                 }
             }
         }

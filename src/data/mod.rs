@@ -4,9 +4,11 @@ pub mod dataset;
 pub mod density;
 pub mod features;
 pub mod frames;
+pub mod motion;
 pub mod points;
 pub mod symmetry;
 pub mod synthetic;
+pub mod twoview;
 
 pub use dataset::{DataError, DataSource, Sample, Sequence, SequenceFile, load_sequences};
 pub use points::{ImageSize, InputError, Kind, MIN_POINTS, Normalization, PointSet};

@@ -166,6 +166,7 @@ mod tests {
             labels: (0..n).map(|i| i % 2).collect(),
             k: 2,
             image_size: image,
+            outliers: false,
         }
     }
 

@@ -370,6 +370,7 @@ impl LceGenerator {
                 labels: rows.iter().map(|r| r.1 - shift).collect(),
                 k: shapes.len() + usize::from(outliers > 0),
                 image_size: None,
+                outliers: outliers > 0,
             },
             outliers,
             transform,

@@ -9,7 +9,7 @@ use super::RegistryError;
 use crate::cluster::Selection;
 use crate::data::frames::FrameSampling;
 use crate::data::symmetry;
-use crate::data::{Kind, Normalization, Symmetry};
+use crate::data::{Kind, Normalization, PointSet, Symmetry};
 use crate::geometry::Family;
 use crate::loss::Loss;
 use crate::model::ModelConfig;
@@ -83,6 +83,10 @@ pub struct ModelCard {
     /// Whether fits refine the learned groups into geometric structures by default.
     #[serde(default)]
     pub refine: bool,
+    /// Trajectory models: fits of tracks of at least this many frames refine by default even
+    /// when `refine` is off (a motion subspace separates motions only on long enough tracks).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub refine_from_frames: Option<usize>,
     /// Whether refinement labels points that fit no structure −1 by default (data without gross
     /// outliers, such as tracks, is better served without).
     #[serde(default = "yes")]
@@ -179,6 +183,12 @@ impl ValidatedRange {
 }
 
 impl ModelCard {
+    /// Whether a fit of `points` refines when its request does not say.
+    pub fn refines(&self, points: &PointSet) -> bool {
+        let long = |from: usize| points.kind() == Kind::Trajectories && points.dim() / 2 >= from;
+        self.refine || self.refine_from_frames.is_some_and(long)
+    }
+
     /// The models a structure of this model may follow.
     pub fn family(&self) -> Family {
         self.geometry.unwrap_or(match self.kind {
@@ -301,6 +311,7 @@ pub fn card_for(
         members: vec![],
         frames: FrameSampling::default(),
         refine: false,
+        refine_from_frames: None,
         outliers: true,
         geometry: None,
         spacing: None,
@@ -333,6 +344,27 @@ mod tests {
         );
         card.test_symmetries = vec![Symmetry::Mirror];
         card.validate().unwrap();
+    }
+
+    #[test]
+    fn long_tracks_refine_by_default_from_the_cards_frame_count() {
+        let mut card = tiny(vec![]).card;
+        let tracks = |frames: usize| {
+            let rows: Vec<Vec<f64>> = (0..6)
+                .map(|i| (0..2 * frames).map(|j| (i * j) as f64).collect())
+                .collect();
+            PointSet::from_rows(Kind::Trajectories, &rows).unwrap()
+        };
+        assert!(!card.refines(&tracks(20)));
+        card.refine_from_frames = Some(15);
+        assert!(!card.refines(&tracks(14)));
+        assert!(card.refines(&tracks(15)) && card.refines(&tracks(40)));
+        // Correspondences are 4 wide: never "2 frames" of a trajectory model.
+        let pairs = PointSet::from_rows(Kind::Correspondences, &vec![vec![0.0; 4]; 8]).unwrap();
+        card.refine_from_frames = Some(2);
+        assert!(!card.refines(&pairs));
+        card.refine = true;
+        assert!(card.refines(&tracks(5)) && card.refines(&pairs));
     }
 
     #[test]

@@ -5,7 +5,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::cluster::{ClusterParams, Clustering, Selection};
 use crate::data::Sample;
-use crate::metrics::{error_rate, mean_median, model_selection_rate, nmi};
+use crate::metrics::{
+    OutlierScore, error_rate, mean_median, model_selection_rate, nmi, outlier_score,
+};
 use crate::pipeline::{self, Embedding, FitError};
 use crate::refine::RefineParams;
 use crate::registry::LoadedModel;
@@ -16,6 +18,10 @@ pub struct Score {
     pub k: usize,
     pub error: f64,
     pub nmi: f64,
+    /// With refinement, on a sample with a gross-outlier group: how well the answer's −1
+    /// labels match it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outliers: Option<OutlierScore>,
 }
 
 /// One evaluated sample.
@@ -47,6 +53,9 @@ pub struct Summary {
     pub mean_nmi: f64,
     /// Share of samples whose K was chosen right (1 for known K).
     pub k_correct: f64,
+    /// Mean outlier precision and recall over the samples that score them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outliers: Option<OutlierScore>,
 }
 
 /// Totals for known K, SOD and silhouette.
@@ -88,6 +97,7 @@ fn score(
             k: clustering.k,
             error: error_rate(&sample.labels, &clustering.labels),
             nmi: nmi(&sample.labels, &clustering.labels),
+            outliers: None,
         },
         Some(r) => {
             let refined = pipeline::refine(model, &sample.points, &clustering, r);
@@ -96,6 +106,10 @@ fn score(
                 k,
                 error: error_rate(&sample.labels, &labels),
                 nmi: nmi(&sample.labels, &labels),
+                outliers: sample.outliers.then(|| {
+                    let truth: Vec<bool> = sample.labels.iter().map(|&l| l == 0).collect();
+                    outlier_score(&truth, &refined.labels)
+                }),
             }
         }
     };
@@ -156,11 +170,18 @@ fn summarise(rows: &[EvalRow], pick: fn(&EvalRow) -> Score) -> Summary {
     let (mean_error, median_error) = mean_median(&errors);
     let nmis: Vec<f64> = rows.iter().map(|r| pick(r).nmi).collect();
     let pairs: Vec<(usize, usize)> = rows.iter().map(|r| (r.k_true, pick(r).k)).collect();
+    let scored: Vec<OutlierScore> = rows.iter().filter_map(|r| pick(r).outliers).collect();
+    let mean =
+        |f: fn(&OutlierScore) -> f64| mean_median(&scored.iter().map(f).collect::<Vec<_>>()).0;
     Summary {
         mean_error,
         median_error,
         mean_nmi: mean_median(&nmis).0,
         k_correct: model_selection_rate(&pairs),
+        outliers: (!scored.is_empty()).then(|| OutlierScore {
+            precision: mean(|o| o.precision),
+            recall: mean(|o| o.recall),
+        }),
     }
 }
 
@@ -228,6 +249,7 @@ mod tests {
             k: k[i],
             error: e[i],
             nmi: 1.0 - e[i],
+            outliers: None,
         };
         EvalRow {
             name: name.into(),
@@ -239,6 +261,47 @@ mod tests {
             residuals: vec![],
             errors_by_k: vec![],
         }
+    }
+
+    /// With refinement, samples with a gross-outlier group score how their −1 labels match it;
+    /// others, and evaluations without refinement, do not.
+    #[test]
+    fn outliers_are_scored_after_refinement_where_the_sample_has_them() {
+        use crate::data::motion::MotionSpec;
+        let model = crate::registry::tests::tiny(vec![]);
+        let sample = |spec: &str| {
+            let spec: MotionSpec = spec.parse().unwrap();
+            spec.sequences().unwrap()[0].sample()
+        };
+        let with = sample("count=1,seed=2,frames=2,motions=2,points=30,outliers=0.2");
+        let without = sample("count=1,seed=2,frames=2,motions=2,points=30");
+        assert!(with.outliers && !without.outliers);
+        let s = EvalSettings {
+            k_max: 4,
+            restarts: 2,
+            seed: 1,
+            refine: Some(RefineParams::default()),
+        };
+        let row = evaluate_sample(&model, &with, &s).unwrap();
+        let o = row.known.outliers.expect("scored");
+        assert!((0.0..=1.0).contains(&o.precision) && (0.0..=1.0).contains(&o.recall));
+        let t = totals(std::slice::from_ref(&row));
+        assert_eq!(t.known.outliers, Some(o));
+        assert!(
+            evaluate_sample(&model, &without, &s)
+                .unwrap()
+                .known
+                .outliers
+                .is_none()
+        );
+        let plain = EvalSettings { refine: None, ..s };
+        assert!(
+            evaluate_sample(&model, &with, &plain)
+                .unwrap()
+                .known
+                .outliers
+                .is_none()
+        );
     }
 
     /// Evaluating embeds once and clusters three times; each score must be what a fit with
@@ -263,6 +326,7 @@ mod tests {
             labels,
             k: 3,
             image_size: Some(ImageSize::new(20.0, 20.0).unwrap()),
+            outliers: false,
         };
         let s = EvalSettings {
             k_max: 5,

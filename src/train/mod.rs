@@ -3,7 +3,11 @@
 //! One step takes one set when the sets differ in size (the paper), or a batch of sets of equal
 //! size (synthetic data). After every epoch the model is scored on the validation samples (error
 //! rate with known K) and the best epoch is kept; without validation samples the last epoch is.
+//!
+//! The commands of `multifit-train` (train, eval, cv, robustness, ...) are library functions in
+//! [`cli`]; the binary only parses their flags.
 
+pub mod cli;
 pub mod cv;
 pub mod eval;
 pub mod robustness;

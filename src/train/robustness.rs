@@ -323,13 +323,14 @@ pub fn run(
     })
 }
 
-/// The evaluation `eval` runs by default for this card.
+/// The evaluation `eval` runs by default for this card; refinement applies to the samples a fit
+/// refines by default ([`crate::registry::ModelCard::refines`]).
 fn eval_settings(card: &crate::registry::ModelCard, k_max: usize, restarts: usize) -> EvalSettings {
     EvalSettings {
         k_max,
         restarts,
         seed: 0,
-        refine: card.refine.then_some(crate::refine::RefineParams {
+        refine: Some(crate::refine::RefineParams {
             outliers: card.outliers,
             threshold: None,
         }),
@@ -349,7 +350,11 @@ fn evaluate_cell(
     let mut rows: Vec<EvalRow> = Vec::with_capacity(cell.samples.len());
     for (sequence, sample) in &cell.samples {
         let model = models.for_sequence(sequence)?;
-        let row = evaluate_sample(model, sample, eval).map_err(|e| RobustnessError::Fit {
+        let eval = EvalSettings {
+            refine: eval.refine.filter(|_| model.card.refines(&sample.points)),
+            ..*eval
+        };
+        let row = evaluate_sample(model, sample, &eval).map_err(|e| RobustnessError::Fit {
             sample: sample.name.clone(),
             reason: e.to_string(),
         })?;
@@ -823,7 +828,9 @@ pub fn markdown(r: &Report) -> String {
         "Model `{}` ({}{}), known K and K chosen by the card's selection ({sel}, K = 1..{}){}. \
          Errors in % under the best matching of groups: mean / median over the cell's samples; \
          \"K right\" is the share of samples whose K {sel} chose right; Δ is the known-K mean \
-         minus that of `{}`, in points. {} samples per generated cell, {} draws per sequence in \
+         minus that of `{}`, in points; \"outliers P / R\" (cells with gross outliers, after \
+         refinement, known K): the share of points answered −1 that are outliers, and of \
+         outliers answered −1. {} samples per generated cell, {} draws per sequence in \
          random real-data cells, data seed {}, {} k-means restarts. {:.0} s in all.\n\n",
         r.model_dir.display(),
         r.kind,
@@ -864,8 +871,13 @@ pub fn markdown(r: &Report) -> String {
     for c in &r.columns {
         out += &format!("{c} | ");
     }
-    out += &format!("samples | points | K | known K | Δ | {sel} | K right | s |\n|---|");
-    out += &"---|".repeat(r.columns.len() + 8);
+    let outlier_column = r.cells.iter().any(|c| c.known.outliers.is_some());
+    out += &format!("samples | points | K | known K | Δ | {sel} | K right | ");
+    if outlier_column {
+        out += "outliers P / R | ";
+    }
+    out += "s |\n|---|";
+    out += &"---|".repeat(r.columns.len() + 8 + usize::from(outlier_column));
     out += "\n";
     for c in &r.cells {
         out += &format!("| {} | ", c.name);
@@ -879,7 +891,7 @@ pub fn markdown(r: &Report) -> String {
             format!("{:+.2}", 100.0 * (c.known.mean_error - base))
         });
         out += &format!(
-            "{} | {:.0} | {:.2} | {} / {} | {} | {} / {} | {:.1} % | {:.0} |\n",
+            "{} | {:.0} | {:.2} | {} / {} | {} | {} / {} | {:.1} % | ",
             c.samples,
             c.mean_points,
             c.mean_k,
@@ -889,8 +901,16 @@ pub fn markdown(r: &Report) -> String {
             pct(c.chosen.mean_error),
             pct(c.chosen.median_error),
             100.0 * c.chosen.k_correct,
-            c.seconds
         );
+        if outlier_column {
+            out += &c.known.outliers.map_or(String::new(), |o| {
+                format!("{:.2} / {:.2} | ", o.precision, o.recall)
+            });
+            if c.known.outliers.is_none() {
+                out += " | ";
+            }
+        }
+        out += &format!("{:.0} |\n", c.seconds);
     }
     let skipped: Vec<String> = r
         .cells
@@ -1147,6 +1167,7 @@ mod tests {
             median_error: e / 2.0,
             mean_nmi: 0.5,
             k_correct: 0.75,
+            outliers: None,
         };
         let cell = |name: &str, e: f64| CellResult {
             name: name.into(),
