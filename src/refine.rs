@@ -9,9 +9,14 @@
 //!    in the caller's units: all structures of a fit measure in the same units);
 //! 2. a point whose smallest residual exceeds the outlier threshold τ is labelled −1 (when
 //!    outliers are allowed);
-//! 3. every structure is fitted again on its points; a structure left with fewer than half the
-//!    points it started with, or fewer than its model needs, is dropped and its points go to the
-//!    others in the next round.
+//! 3. every structure is fitted again on its points, keeping its model type (a line stays a
+//!    line while points move); a structure left with fewer than half the points it started
+//!    with, or fewer than its model needs, is dropped and its points go to the others in the
+//!    next round. A round that moves no point ends the rounds.
+//!
+//! Once the rounds settle, each structure's type is chosen again on its final points (the
+//! learned group it started from may have held foreign points that swayed the first choice),
+//! and every point is assigned once more.
 //!
 //! **Noise and threshold.** The noise level σ is the median of the groups' robust noise levels
 //! (each 1.4826 × the median residual inside its group, [`geometry::Fit::sigma`]): the sensor's
@@ -150,25 +155,40 @@ pub fn refine(
         .threshold
         .unwrap_or(OUTLIER_SIGMAS * sigma)
         .max(f64::MIN_POSITIVE);
+    let refit_same_type = |idx: &[usize], g: &Group| {
+        let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
+        geometry::fit_type(g.fit.model.type_name(), &rows).unwrap_or_else(|| fit_on(idx))
+    };
+    let mut moved = false;
     for _ in 0..MAX_ITERATIONS {
         let next = assign(points, &current, &groups, params.outliers, threshold);
-        let changed = next != current;
-        current = next;
+        if next == current {
+            break;
+        }
+        (current, moved) = (next, true);
         for (j, slot) in groups.iter_mut().enumerate() {
             let Some(g) = slot else { continue };
             if g.frozen {
                 continue;
             }
             let idx = members(&current, j);
-            let fit = fit_on(&idx);
+            let fit = refit_same_type(&idx, g);
             if 2 * idx.len() < g.start || matches!(fit.model, Model::Degenerate { .. }) {
                 *slot = None;
             } else {
                 g.fit = fit;
             }
         }
-        if !changed {
-            break;
+    }
+    // The type of each structure, chosen again on its settled points (unmoved groups keep
+    // their first fit, which was chosen on the same points).
+    for (j, slot) in groups.iter_mut().enumerate() {
+        let Some(g) = slot.as_mut().filter(|g| moved && !g.frozen) else {
+            continue;
+        };
+        let fit = fit_on(&members(&current, j));
+        if !matches!(fit.model, Model::Degenerate { .. }) {
+            g.fit = fit;
         }
     }
     if merge_structures {
