@@ -67,6 +67,20 @@ pub enum ModelError {
     Load { path: String, reason: String },
 }
 
+/// Why a saved safetensors file's header could not be rewritten in sorted order. Its text is the
+/// `reason` of [`ModelError::Save`].
+#[derive(Debug, thiserror::Error)]
+enum HeaderError {
+    #[error("{0}")]
+    Io(std::io::Error),
+    #[error("not a safetensors file: bad header length")]
+    Length,
+    #[error("header: {0}")]
+    Parse(serde_json::Error),
+    #[error("{0}")]
+    Write(serde_json::Error),
+}
+
 impl ModelConfig {
     pub fn new(input_dim: usize) -> Self {
         Self {
@@ -319,7 +333,7 @@ impl EmbeddingNet {
         };
         let mut store = SafetensorsStore::from_file(path).overwrite(true);
         self.save_into(&mut store).map_err(|e| err(e.to_string()))?;
-        sort_safetensors_header(path).map_err(err)
+        sort_safetensors_header(path).map_err(|e| err(e.to_string()))
     }
 
     /// Loads weights written by [`EmbeddingNet::save`] into a network built from `config`.
@@ -363,15 +377,15 @@ pub fn cpu_device() -> Device {
 /// `__metadata__` from a hash map, so its key order, and with it the file's bytes and
 /// `weights_sha256`, changed from save to save of the same weights; sorted, the same weights always
 /// give the same file. The tensor data and their offsets (relative to the data) are unchanged.
-fn sort_safetensors_header(path: &Path) -> Result<(), String> {
-    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
+fn sort_safetensors_header(path: &Path) -> Result<(), HeaderError> {
+    let bytes = std::fs::read(path).map_err(HeaderError::Io)?;
     let len = bytes
         .get(..8)
         .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")) as usize)
         .filter(|&n| 8 + n <= bytes.len())
-        .ok_or("not a safetensors file: bad header length")?;
+        .ok_or(HeaderError::Length)?;
     let header: std::collections::BTreeMap<String, serde_json::Value> =
-        serde_json::from_slice(&bytes[8..8 + len]).map_err(|e| format!("header: {e}"))?;
+        serde_json::from_slice(&bytes[8..8 + len]).map_err(HeaderError::Parse)?;
     let sorted: std::collections::BTreeMap<&String, serde_json::Value> = header
         .iter()
         .map(|(k, v)| match v.as_object() {
@@ -383,7 +397,7 @@ fn sort_safetensors_header(path: &Path) -> Result<(), String> {
             None => (k, v.clone()),
         })
         .collect();
-    let mut text = serde_json::to_string(&sorted).map_err(|e| e.to_string())?;
+    let mut text = serde_json::to_string(&sorted).map_err(HeaderError::Write)?;
     // The data starts 8-aligned, as the format asks: pad the header with spaces.
     while text.len() % 8 != 0 {
         text.push(' ');
@@ -392,7 +406,7 @@ fn sort_safetensors_header(path: &Path) -> Result<(), String> {
     out.extend_from_slice(&(text.len() as u64).to_le_bytes());
     out.extend_from_slice(text.as_bytes());
     out.extend_from_slice(&bytes[8 + len..]);
-    std::fs::write(path, out).map_err(|e| e.to_string())
+    std::fs::write(path, out).map_err(HeaderError::Io)
 }
 
 #[cfg(test)]

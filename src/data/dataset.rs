@@ -5,10 +5,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::motion::MotionSpec;
+use super::motion::{MotionParamsError, MotionSpec};
 use super::points::{ImageSize, InputError, Kind, PointSet};
-use super::synthetic::LceSpec;
-use super::twoview::TwoViewSpec;
+use super::synthetic::{LceConfigError, LceSpec};
+use super::twoview::{TwoViewParamsError, TwoViewSpec};
 
 /// Why a dataset file or directory could not be used. Every variant names the file.
 #[derive(Debug, thiserror::Error)]
@@ -27,6 +27,45 @@ pub enum DataError {
     Invalid { path: PathBuf, reason: String },
     #[error("{path}: no dataset files (*.json) found")]
     NoFiles { path: PathBuf },
+}
+
+/// Why the text of a [`DataSource`] (or of a range, [`super::synthetic::parse_range`]) cannot be
+/// used. Errors about a generator's settings name the spec key (`frames=1: ...`).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SpecError {
+    #[error("empty dataset path")]
+    EmptyPath,
+    #[error("unknown LCE variant {0:?} (mixed, unmixed, random)")]
+    UnknownLceVariant(String),
+    #[error("unknown two-view mode {0:?} (homography, fundamental)")]
+    UnknownTwoViewMode(String),
+    #[error("{part:?} is not key=value")]
+    NotKeyValue { part: String },
+    /// A key the generator does not have; `known` lists those it has.
+    #[error("unknown {generator} setting {key:?} ({known})")]
+    UnknownSetting {
+        generator: &'static str,
+        key: String,
+        known: &'static str,
+    },
+    /// A value that does not parse as its setting's type.
+    #[error("{key}={value:?}: {reason}")]
+    Value {
+        key: String,
+        value: String,
+        reason: String,
+    },
+    /// One end of a range (`N` or `MIN-MAX`) that does not parse.
+    #[error("{text:?}: {reason}")]
+    Range { text: String, reason: String },
+    #[error("count={count}: count must be 1 to {max}")]
+    Count { count: usize, max: usize },
+    #[error(transparent)]
+    Lce(#[from] LceConfigError),
+    #[error("{}", .0.for_spec())]
+    Motion(MotionParamsError),
+    #[error("{}", .0.for_spec())]
+    TwoView(TwoViewParamsError),
 }
 
 /// One sequence file as stored on disk.
@@ -247,9 +286,9 @@ pub enum DataSource {
 }
 
 impl std::str::FromStr for DataSource {
-    type Err = String;
+    type Err = SpecError;
 
-    fn from_str(text: &str) -> Result<Self, String> {
+    fn from_str(text: &str) -> Result<Self, SpecError> {
         if let Some(spec) = text.strip_prefix("motion:") {
             return spec.parse().map(DataSource::Motion);
         }
@@ -258,7 +297,7 @@ impl std::str::FromStr for DataSource {
         }
         match text.strip_prefix("lce:") {
             Some(spec) => spec.parse().map(DataSource::Lce),
-            None if text.is_empty() => Err("empty dataset path".into()),
+            None if text.is_empty() => Err(SpecError::EmptyPath),
             None => Ok(DataSource::Path(PathBuf::from(text))),
         }
     }

@@ -10,6 +10,8 @@ pub mod symmetry;
 pub mod synthetic;
 pub mod twoview;
 
-pub use dataset::{DataError, DataSource, Sample, Sequence, SequenceFile, load_sequences};
+pub use dataset::{
+    DataError, DataSource, Sample, Sequence, SequenceFile, SpecError, load_sequences,
+};
 pub use points::{ImageSize, InputError, Kind, MIN_POINTS, Normalization, PointSet};
 pub use symmetry::{Symmetry, with_symmetries};

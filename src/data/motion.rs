@@ -84,7 +84,7 @@ use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal, StandardNormal, UnitBall, UnitSphere};
 
-use super::dataset::{DataError, Sample, Sequence, SequenceFile};
+use super::dataset::{DataError, Sample, Sequence, SequenceFile, SpecError};
 use super::points::{ImageSize, Kind, PointSet};
 use super::synthetic::parse_range;
 use crate::geometry::linalg::{IDENTITY3, Mat3, mat3_mul, mat3_transpose, mat3_vec, rodrigues};
@@ -774,15 +774,14 @@ impl MotionSpec {
     pub const MAX_COUNT: usize = 1_000_000;
 
     /// Checks the count and the params; errors name the spec key (`frames=1: ...`).
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SpecError> {
         if self.count == 0 || self.count > Self::MAX_COUNT {
-            return Err(format!(
-                "count={}: count must be 1 to {}",
-                self.count,
-                Self::MAX_COUNT
-            ));
+            return Err(SpecError::Count {
+                count: self.count,
+                max: Self::MAX_COUNT,
+            });
         }
-        self.params.validate().map_err(|e| e.for_spec())
+        self.params.validate().map_err(SpecError::Motion)
     }
 
     /// The samples in the on-disk format, in generation order, named `motion-s<seed>-<i:05>`.
@@ -834,7 +833,7 @@ impl std::fmt::Display for MotionSpec {
 }
 
 /// `A` or `A-B` as a range.
-pub(super) fn parse_pair<T: std::str::FromStr + Copy>(text: &str) -> Result<[T; 2], String>
+pub(super) fn parse_pair<T: std::str::FromStr + Copy>(text: &str) -> Result<[T; 2], SpecError>
 where
     T::Err: std::fmt::Display,
 {
@@ -843,21 +842,25 @@ where
 }
 
 impl std::str::FromStr for MotionSpec {
-    type Err = String;
+    type Err = SpecError;
 
     /// Parses the part after `motion:`, e.g. `count=500,seed=3,frames=5,motions=2-4` (empty:
     /// every default).
-    fn from_str(text: &str) -> Result<Self, String> {
+    fn from_str(text: &str) -> Result<Self, SpecError> {
         let mut spec = MotionSpec {
             count: 200,
             seed: 0,
             params: MotionParams::default(),
         };
         for part in text.split(',').filter(|p| !p.is_empty()) {
-            let (key, value) = part
-                .split_once('=')
-                .ok_or_else(|| format!("{part:?} is not key=value"))?;
-            let bad = |e: &dyn std::fmt::Display| format!("{key}={value:?}: {e}");
+            let (key, value) = part.split_once('=').ok_or_else(|| SpecError::NotKeyValue {
+                part: part.to_string(),
+            })?;
+            let bad = |e: &dyn std::fmt::Display| SpecError::Value {
+                key: key.to_string(),
+                value: value.to_string(),
+                reason: e.to_string(),
+            };
             let p = &mut spec.params;
             match key {
                 "count" => spec.count = value.parse().map_err(|e| bad(&e))?,
@@ -872,9 +875,11 @@ impl std::str::FromStr for MotionSpec {
                 "width" => p.width = parse_pair(value).map_err(|e| bad(&e))?,
                 "height" => p.height = parse_pair(value).map_err(|e| bad(&e))?,
                 _ => {
-                    return Err(format!(
-                        "unknown motion setting {key:?} (count, seed, frames, motions, points, noise, outliers, motion-scale, focal, width, height)"
-                    ));
+                    return Err(SpecError::UnknownSetting {
+                        generator: "motion",
+                        key: key.to_string(),
+                        known: "count, seed, frames, motions, points, noise, outliers, motion-scale, focal, width, height",
+                    });
                 }
             }
         }
@@ -1339,7 +1344,7 @@ mod tests {
             ("colour=red", "unknown motion setting"),
             ("seed", "not key=value"),
         ] {
-            let err = bad.parse::<MotionSpec>().unwrap_err();
+            let err = bad.parse::<MotionSpec>().unwrap_err().to_string();
             assert!(err.contains(says), "{bad}: {err}");
         }
     }

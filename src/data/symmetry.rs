@@ -137,13 +137,27 @@ pub fn closure<T>(
     out
 }
 
+/// Why a list of symmetries cannot be used for inputs of a kind ([`check`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SymmetryError {
+    /// `symmetry`, one of `list`, is repeated or has no image for inputs of `kind`.
+    #[error("symmetries {list:?}: {symmetry:?} is repeated or does not apply to {kind}")]
+    Unusable {
+        list: Vec<Symmetry>,
+        symmetry: Symmetry,
+        kind: Kind,
+    },
+}
+
 /// Checks a list of symmetries for inputs of `kind`: each applies to it and none is repeated.
-pub fn check(symmetries: &[Symmetry], kind: Kind) -> Result<(), String> {
+pub fn check(symmetries: &[Symmetry], kind: Kind) -> Result<(), SymmetryError> {
     for (i, s) in symmetries.iter().enumerate() {
         if !s.applies_to(kind) || symmetries[..i].contains(s) {
-            return Err(format!(
-                "symmetries {symmetries:?}: {s:?} is repeated or does not apply to {kind}"
-            ));
+            return Err(SymmetryError::Unusable {
+                list: symmetries.to_vec(),
+                symmetry: *s,
+                kind,
+            });
         }
     }
     Ok(())
@@ -282,8 +296,15 @@ mod tests {
         assert!(check(&[Symmetry::Mirror, Symmetry::Reverse], Kind::Trajectories).is_ok());
         assert!(check(&[], Kind::Points2d).is_ok());
         let repeated = check(&[Symmetry::Mirror, Symmetry::Mirror], Kind::Correspondences);
-        assert!(repeated.unwrap_err().contains("Mirror is repeated"));
-        let reverse = check(&[Symmetry::Reverse], Kind::Points2d).unwrap_err();
+        assert!(
+            repeated
+                .unwrap_err()
+                .to_string()
+                .contains("Mirror is repeated")
+        );
+        let reverse = check(&[Symmetry::Reverse], Kind::Points2d)
+            .unwrap_err()
+            .to_string();
         assert!(reverse.contains("does not apply to points2d"), "{reverse}");
     }
 }

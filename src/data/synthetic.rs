@@ -42,7 +42,7 @@ use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use super::dataset::{DataError, Sample, Sequence, SequenceFile};
+use super::dataset::{DataError, Sample, Sequence, SequenceFile, SpecError};
 use super::points::{Kind, PointSet};
 
 /// How many structures a sample of the `random` variant has.
@@ -231,13 +231,18 @@ impl Default for LceConfig {
 
 /// Splits `MIN-MAX` (either may be a float with an exponent, such as `1e-3`); one value `N`
 /// gives `(N, None)`.
-pub fn parse_range<T: std::str::FromStr>(text: &str) -> Result<(T, Option<T>), String>
+pub fn parse_range<T: std::str::FromStr>(text: &str) -> Result<(T, Option<T>), SpecError>
 where
     T::Err: std::fmt::Display,
 {
     let bytes = text.as_bytes();
     let cut = (1..bytes.len()).find(|&i| bytes[i] == b'-' && !matches!(bytes[i - 1], b'e' | b'E'));
-    let one = |t: &str| t.trim().parse::<T>().map_err(|e| format!("{t:?}: {e}"));
+    let one = |t: &str| {
+        t.trim().parse::<T>().map_err(|e| SpecError::Range {
+            text: t.to_string(),
+            reason: e.to_string(),
+        })
+    };
     match cut {
         Some(i) => Ok((one(&text[..i])?, Some(one(&text[i + 1..])?))),
         None => Ok((one(text)?, None)),
@@ -518,15 +523,14 @@ impl LceSpec {
 
     /// Checks what a generator needs: a valid config and 1 to [`Self::MAX_COUNT`] samples.
     /// Errors name the spec's key (`points=1: ...`).
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SpecError> {
         if self.count == 0 || self.count > Self::MAX_COUNT {
-            return Err(format!(
-                "count={}: count must be 1 to {}",
-                self.count,
-                Self::MAX_COUNT
-            ));
+            return Err(SpecError::Count {
+                count: self.count,
+                max: Self::MAX_COUNT,
+            });
         }
-        self.config.validate().map_err(|e| e.to_string())
+        self.config.validate().map_err(SpecError::Lce)
     }
 
     /// The samples in the on-disk format, in generation order, each with its file name: what
@@ -596,21 +600,17 @@ impl std::fmt::Display for LceSpec {
 }
 
 impl std::str::FromStr for LceSpec {
-    type Err = String;
+    type Err = SpecError;
 
     /// Parses the part after `lce:`, e.g. `mixed,count=12000,seed=301,scale=2` or
     /// `random,points=20-300,arc=90-360,outliers=0.2,similarity=true`.
-    fn from_str(text: &str) -> Result<Self, String> {
+    fn from_str(text: &str) -> Result<Self, SpecError> {
         let mut parts = text.split(',');
         let variant = match parts.next().unwrap_or_default() {
             "mixed" => LceVariant::Mixed,
             "unmixed" => LceVariant::Unmixed,
             "random" => LceVariant::Random,
-            other => {
-                return Err(format!(
-                    "unknown LCE variant {other:?} (mixed, unmixed, random)"
-                ));
-            }
+            other => return Err(SpecError::UnknownLceVariant(other.to_string())),
         };
         let mut spec = LceSpec {
             variant,
@@ -619,10 +619,14 @@ impl std::str::FromStr for LceSpec {
             config: LceConfig::default(),
         };
         for part in parts {
-            let (key, value) = part
-                .split_once('=')
-                .ok_or_else(|| format!("{part:?} is not key=value"))?;
-            let bad = |e: &dyn std::fmt::Display| format!("{key}={value:?}: {e}");
+            let (key, value) = part.split_once('=').ok_or_else(|| SpecError::NotKeyValue {
+                part: part.to_string(),
+            })?;
+            let bad = |e: &dyn std::fmt::Display| SpecError::Value {
+                key: key.to_string(),
+                value: value.to_string(),
+                reason: e.to_string(),
+            };
             let c = &mut spec.config;
             match key {
                 "count" => spec.count = value.parse().map_err(|e| bad(&e))?,
@@ -639,9 +643,11 @@ impl std::str::FromStr for LceSpec {
                 "outliers" => c.outliers = value.parse().map_err(|e| bad(&e))?,
                 "similarity" => c.similarity = value.parse().map_err(|e| bad(&e))?,
                 _ => {
-                    return Err(format!(
-                        "unknown LCE setting {key:?} (count, seed, scale, noise, points, arc, outliers, similarity)"
-                    ));
+                    return Err(SpecError::UnknownSetting {
+                        generator: "LCE",
+                        key: key.to_string(),
+                        known: "count, seed, scale, noise, points, arc, outliers, similarity",
+                    });
                 }
             }
         }
@@ -739,7 +745,7 @@ mod tests {
             ("mixed,colour=red", "unknown LCE setting"),
             ("mixed,seed", "not key=value"),
         ] {
-            let err = bad.parse::<LceSpec>().unwrap_err();
+            let err = bad.parse::<LceSpec>().unwrap_err().to_string();
             assert!(err.contains(says), "{bad}: {err}");
         }
     }

@@ -78,7 +78,7 @@ use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal, UnitSphere};
 
-use super::dataset::{DataError, Sample, Sequence, SequenceFile};
+use super::dataset::{DataError, Sample, Sequence, SequenceFile, SpecError};
 use super::motion::{
     V3, add, log_uniform, parse_pair, random_rotation, range_text, scale, sub, uniform,
 };
@@ -814,15 +814,14 @@ impl TwoViewSpec {
     pub const MAX_COUNT: usize = 1_000_000;
 
     /// Checks the count and the params; errors name the spec key (`groups=0: ...`).
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SpecError> {
         if self.count == 0 || self.count > Self::MAX_COUNT {
-            return Err(format!(
-                "count={}: count must be 1 to {}",
-                self.count,
-                Self::MAX_COUNT
-            ));
+            return Err(SpecError::Count {
+                count: self.count,
+                max: Self::MAX_COUNT,
+            });
         }
-        self.params.validate().map_err(|e| e.for_spec())
+        self.params.validate().map_err(SpecError::TwoView)
     }
 
     /// The samples in the on-disk format, in generation order, named
@@ -875,19 +874,15 @@ impl std::fmt::Display for TwoViewSpec {
 }
 
 impl std::str::FromStr for TwoViewSpec {
-    type Err = String;
+    type Err = SpecError;
 
     /// Parses the part after `twoview:`, e.g. `homography,count=500,groups=2-4,outliers=0.3`.
-    fn from_str(text: &str) -> Result<Self, String> {
+    fn from_str(text: &str) -> Result<Self, SpecError> {
         let mut parts = text.split(',');
         let mode = match parts.next().unwrap_or_default() {
             "homography" => TwoViewMode::Homography,
             "fundamental" => TwoViewMode::Fundamental,
-            other => {
-                return Err(format!(
-                    "unknown two-view mode {other:?} (homography, fundamental)"
-                ));
-            }
+            other => return Err(SpecError::UnknownTwoViewMode(other.to_string())),
         };
         let mut spec = TwoViewSpec {
             count: 200,
@@ -895,10 +890,14 @@ impl std::str::FromStr for TwoViewSpec {
             params: TwoViewParams::new(mode),
         };
         for part in parts {
-            let (key, value) = part
-                .split_once('=')
-                .ok_or_else(|| format!("{part:?} is not key=value"))?;
-            let bad = |e: &dyn std::fmt::Display| format!("{key}={value:?}: {e}");
+            let (key, value) = part.split_once('=').ok_or_else(|| SpecError::NotKeyValue {
+                part: part.to_string(),
+            })?;
+            let bad = |e: &dyn std::fmt::Display| SpecError::Value {
+                key: key.to_string(),
+                value: value.to_string(),
+                reason: e.to_string(),
+            };
             let p = &mut spec.params;
             match key {
                 "count" => spec.count = value.parse().map_err(|e| bad(&e))?,
@@ -911,9 +910,11 @@ impl std::str::FromStr for TwoViewSpec {
                 "width" => p.width = parse_pair(value).map_err(|e| bad(&e))?,
                 "height" => p.height = parse_pair(value).map_err(|e| bad(&e))?,
                 _ => {
-                    return Err(format!(
-                        "unknown two-view setting {key:?} (count, seed, groups, points, noise, outliers, focal, width, height)"
-                    ));
+                    return Err(SpecError::UnknownSetting {
+                        generator: "two-view",
+                        key: key.to_string(),
+                        known: "count, seed, groups, points, noise, outliers, focal, width, height",
+                    });
                 }
             }
         }
@@ -1298,7 +1299,7 @@ mod tests {
             ("homography,colour=red", "unknown two-view setting"),
             ("homography,seed", "not key=value"),
         ] {
-            let err = bad.parse::<TwoViewSpec>().unwrap_err();
+            let err = bad.parse::<TwoViewSpec>().unwrap_err().to_string();
             assert!(err.contains(says), "{bad:?}: {err}");
         }
     }

@@ -38,11 +38,11 @@
 
 use std::f64::consts::{FRAC_PI_2, PI};
 
-use super::Model;
 use super::linalg::{Mat3, mat3_inverse, mat3_mul, norm2, solve, sym_eigen, sym2_eigen};
 use super::lm::{LeastSquares, minimise};
 use super::normalise::{Similarity, is_collinear};
 use super::robust::Estimator;
+use super::{GeometryError, Model};
 
 /// Levenberg–Marquardt evaluations of the geometric refinements.
 const REFINE_EVALUATIONS: usize = 10;
@@ -69,12 +69,12 @@ pub fn circle_distance(cx: f64, cy: f64, r: f64, x: f64, y: f64) -> f64 {
 fn normalise_checked(
     points: &[[f64; 2]],
     weights: &[f64],
-) -> Result<(Similarity, Vec<[f64; 2]>), String> {
+) -> Result<(Similarity, Vec<[f64; 2]>), GeometryError> {
     let t = Similarity::hartley(points.iter().copied().zip(weights.iter().copied()))
-        .ok_or("all points coincide")?;
+        .ok_or(GeometryError::Coincident)?;
     let q: Vec<[f64; 2]> = points.iter().map(|p| t.apply(*p)).collect();
     if is_collinear(&q, weights) {
-        return Err("points are collinear".into());
+        return Err(GeometryError::Collinear);
     }
     Ok((t, q))
 }
@@ -96,7 +96,7 @@ impl Estimator for CircleEstimator {
         8
     }
 
-    fn fit(&self, points: &[[f64; 2]], weights: &[f64]) -> Result<[f64; 3], String> {
+    fn fit(&self, points: &[[f64; 2]], weights: &[f64]) -> Result<[f64; 3], GeometryError> {
         let (t, q) = normalise_checked(points, weights)?;
         // Normal equations of [2x, 2y, 1]·[cx, cy, k] = x² + y².
         let mut a = [0.0; 9];
@@ -113,16 +113,14 @@ impl Estimator for CircleEstimator {
                 }
             }
         }
-        let sol = solve(&a, &rhs, 3).ok_or("points are collinear")?;
+        let sol = solve(&a, &rhs, 3).ok_or(GeometryError::Collinear)?;
         let r2 = sol[2] + sol[0] * sol[0] + sol[1] * sol[1];
         if !(r2 > 0.0) {
-            return Err("no circle fits the points".into());
+            return Err(GeometryError::NoCircle);
         }
         let r = r2.sqrt();
         if r > MAX_SIZE {
-            return Err(format!(
-                "points are nearly collinear (circle radius {r:.3e} × their spread)"
-            ));
+            return Err(GeometryError::FlatCircle { radius: r });
         }
         Ok([t.mx + sol[0] / t.k, t.my + sol[1] / t.k, r / t.k])
     }
@@ -410,7 +408,7 @@ impl Estimator for EllipseEstimator {
         8
     }
 
-    fn fit(&self, points: &[[f64; 2]], weights: &[f64]) -> Result<EllipseParams, String> {
+    fn fit(&self, points: &[[f64; 2]], weights: &[f64]) -> Result<EllipseParams, GeometryError> {
         let (t, q) = normalise_checked(points, weights)?;
         let (mut s1, mut s2, mut s3) = ([0.0; 9], [0.0; 9], [0.0; 9]);
         for (p, &w) in q.iter().zip(weights) {
@@ -428,7 +426,7 @@ impl Estimator for EllipseEstimator {
                 }
             }
         }
-        let s3_inv = mat3_inverse(&s3).ok_or("points do not determine a conic")?;
+        let s3_inv = mat3_inverse(&s3).ok_or(GeometryError::NoConic)?;
         let s2t: Mat3 = [
             s2[0], s2[3], s2[6], s2[1], s2[4], s2[7], s2[2], s2[5], s2[8],
         ];
@@ -449,9 +447,7 @@ impl Estimator for EllipseEstimator {
         let me = sym_eigen(&m, 3);
         let top = me.values[2];
         if !(top > 0.0) || !(me.values[1] > 1e-12 * top) {
-            return Err(
-                "fewer than 5 points in general position: the conic is not determined".into(),
-            );
+            return Err(GeometryError::ConicUndetermined);
         }
         // N = M^(−1/2), eigenvalues floored.
         let mut n = [0.0; 9];
@@ -468,7 +464,7 @@ impl Estimator for EllipseEstimator {
         let k = mat3_mul(&mat3_mul(&n, &c1), &n);
         let ke = sym_eigen(&k, 3);
         if !(ke.values[2] > 0.0) {
-            return Err("no ellipse fits the points".into());
+            return Err(GeometryError::NoEllipse);
         }
         let y = ke.vector(2);
         let a1: Vec<f64> = (0..3)
@@ -478,12 +474,9 @@ impl Estimator for EllipseEstimator {
             .map(|i| (0..3).map(|j| tm[i * 3 + j] * a1[j]).sum())
             .collect();
         let e = conic_to_ellipse([a1[0], a1[1], a1[2], a2[0], a2[1], a2[2]])
-            .ok_or("no ellipse fits the points (the best conic is not a real ellipse)")?;
+            .ok_or(GeometryError::NotRealEllipse)?;
         if e[2] > MAX_SIZE {
-            return Err(format!(
-                "points are nearly collinear (ellipse axis {:.3e} × their spread)",
-                e[2]
-            ));
+            return Err(GeometryError::FlatEllipse { axis: e[2] });
         }
         Ok([
             t.mx + e[0] / t.k,

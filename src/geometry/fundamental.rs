@@ -22,7 +22,6 @@
 //! the case of a planar scene, a pure rotation, or a pure image translation x₂ = x₁ + t (all
 //! consistent with a homography, which GRIC then prefers).
 
-use super::Model;
 use super::homography::NULLITY;
 use super::linalg::{
     Mat3, mat3_mul, mat3_transpose, mat3_vec, null_vector, rodrigues, svd, unit_norm_sign,
@@ -30,6 +29,7 @@ use super::linalg::{
 use super::lm::{LeastSquares, minimise};
 use super::normalise::TwoView;
 use super::robust::Estimator;
+use super::{GeometryError, Model};
 
 /// Levenberg–Marquardt evaluations of the refinement.
 const REFINE_EVALUATIONS: usize = 8;
@@ -114,7 +114,7 @@ impl Estimator for FundamentalEstimator {
         10
     }
 
-    fn fit(&self, points: &[[f64; 4]], weights: &[f64]) -> Result<Mat3, String> {
+    fn fit(&self, points: &[[f64; 4]], weights: &[f64]) -> Result<Mat3, GeometryError> {
         let tv = TwoView::new(points, weights)?;
         let mut rows: Vec<[f64; 9]> = Vec::with_capacity(points.len());
         for ((a, b), &w) in tv.q1.iter().zip(&tv.q2).zip(weights) {
@@ -126,19 +126,18 @@ impl Estimator for FundamentalEstimator {
             rows.push([x2 * x1, x2 * y1, x2, y2 * x1, y2 * y1, y2, x1, y1, 1.0].map(|v| s * v));
         }
         if rows.len() < 8 {
-            return Err(format!("{} correspondences, at least 8 needed", rows.len()));
+            return Err(GeometryError::TooFewCorrespondences {
+                n: rows.len(),
+                min: 8,
+            });
         }
-        let (f, sv) = null_vector(&rows).ok_or("fewer than 8 correspondences")?;
+        let (f, sv) = null_vector(&rows).ok_or(GeometryError::FewerCorrespondences { min: 8 })?;
         if !(sv[7] > NULLITY * sv[0]) {
-            return Err(
-                "correspondences do not determine a fundamental matrix (planar scene, \
-                        pure rotation or pure image translation: a homography explains them)"
-                    .into(),
-            );
+            return Err(GeometryError::FundamentalUndetermined);
         }
         let (u, s1, s2, v) = rank2(&f);
         unit_norm_sign(&denormalise(&tv, &compose(&u, s1, s2, &v)))
-            .ok_or_else(|| "no fundamental matrix fits".into())
+            .ok_or(GeometryError::NoFundamental)
     }
 
     fn refine(&self, f: Mat3, points: &[[f64; 4]], weights: &[f64]) -> Mat3 {

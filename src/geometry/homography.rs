@@ -25,11 +25,11 @@
 //! in either image, or a DLT whose second-smallest singular value is below 10⁻⁶ of the largest
 //! (the correspondences do not determine H), or a singular H.
 
-use super::Model;
 use super::linalg::{Mat3, mat3_inverse, mat3_mul, mat3_vec, null_vector, solve, unit_norm_sign};
 use super::lm::{LeastSquares, minimise};
 use super::normalise::{TwoView, is_collinear};
 use super::robust::Estimator;
+use super::{GeometryError, Model};
 
 /// Levenberg–Marquardt evaluations of the refinement.
 const REFINE_EVALUATIONS: usize = 8;
@@ -103,13 +103,13 @@ pub fn affine_from_wire(a: &[f64; 6]) -> Option<Homography> {
 }
 
 /// Normalised two-view data with the collinearity checks of both images.
-fn normalised(points: &[[f64; 4]], weights: &[f64]) -> Result<TwoView, String> {
+fn normalised(points: &[[f64; 4]], weights: &[f64]) -> Result<TwoView, GeometryError> {
     let tv = TwoView::new(points, weights)?;
     if is_collinear(&tv.q1, weights) {
-        return Err("points of image 1 are collinear".into());
+        return Err(GeometryError::CollinearImage { image: 1 });
     }
     if is_collinear(&tv.q2, weights) {
-        return Err("points of image 2 are collinear".into());
+        return Err(GeometryError::CollinearImage { image: 2 });
     }
     Ok(tv)
 }
@@ -140,7 +140,7 @@ impl Estimator for HomographyEstimator {
         6
     }
 
-    fn fit(&self, points: &[[f64; 4]], weights: &[f64]) -> Result<Homography, String> {
+    fn fit(&self, points: &[[f64; 4]], weights: &[f64]) -> Result<Homography, GeometryError> {
         let tv = normalised(points, weights)?;
         let mut rows: Vec<[f64; 9]> = Vec::with_capacity(2 * points.len());
         for ((a, b), &w) in tv.q1.iter().zip(&tv.q2).zip(weights) {
@@ -152,15 +152,12 @@ impl Estimator for HomographyEstimator {
             rows.push([0.0, 0.0, 0.0, -x, -y, -s, v * x, v * y, v * s]);
             rows.push([x, y, s, 0.0, 0.0, 0.0, -u * x, -u * y, -u * s]);
         }
-        let (hn, sv) = null_vector(&rows).ok_or("fewer than 4 correspondences")?;
+        let (hn, sv) = null_vector(&rows).ok_or(GeometryError::FewerCorrespondences { min: 4 })?;
         if !(sv[7] > NULLITY * sv[0]) {
-            return Err(
-                "correspondences do not determine a homography (fewer than 4 in general position)"
-                    .into(),
-            );
+            return Err(GeometryError::HomographyUndetermined);
         }
-        let h = unit_norm_sign(&denormalise(&tv, &hn)).ok_or("no homography fits")?;
-        Homography::new(h).ok_or_else(|| "the homography is singular".into())
+        let h = unit_norm_sign(&denormalise(&tv, &hn)).ok_or(GeometryError::NoHomography)?;
+        Homography::new(h).ok_or(GeometryError::SingularHomography)
     }
 
     fn refine(&self, h: Homography, points: &[[f64; 4]], weights: &[f64]) -> Homography {
@@ -188,10 +185,10 @@ impl Estimator for AffineEstimator {
         6
     }
 
-    fn fit(&self, points: &[[f64; 4]], weights: &[f64]) -> Result<Homography, String> {
+    fn fit(&self, points: &[[f64; 4]], weights: &[f64]) -> Result<Homography, GeometryError> {
         let tv = TwoView::new(points, weights)?;
         if is_collinear(&tv.q1, weights) {
-            return Err("points of image 1 are collinear".into());
+            return Err(GeometryError::CollinearImage { image: 1 });
         }
         let (mut n, mut rx, mut ry) = ([0.0; 9], [0.0; 3], [0.0; 3]);
         for ((a, b), &w) in tv.q1.iter().zip(&tv.q2).zip(weights) {
@@ -207,10 +204,10 @@ impl Estimator for AffineEstimator {
                 }
             }
         }
-        let ax = solve(&n, &rx, 3).ok_or("points of image 1 are collinear")?;
-        let ay = solve(&n, &ry, 3).ok_or("points of image 1 are collinear")?;
+        let ax = solve(&n, &rx, 3).ok_or(GeometryError::CollinearImage { image: 1 })?;
+        let ay = solve(&n, &ry, 3).ok_or(GeometryError::CollinearImage { image: 1 })?;
         let hn = [ax[0], ax[1], ax[2], ay[0], ay[1], ay[2], 0.0, 0.0, 1.0];
-        Homography::new(denormalise(&tv, &hn)).ok_or_else(|| "the affine map is singular".into())
+        Homography::new(denormalise(&tv, &hn)).ok_or(GeometryError::SingularAffine)
     }
 
     fn refine(&self, h: Homography, points: &[[f64; 4]], weights: &[f64]) -> Homography {

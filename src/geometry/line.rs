@@ -8,10 +8,10 @@
 //!
 //! Sign convention: a > 0, or a = 0 and b > 0.
 
-use super::Model;
 use super::linalg::{norm2, sym2_eigen};
 use super::normalise::is_coincident;
 use super::robust::Estimator;
+use super::{GeometryError, Model};
 
 /// Orthogonal distance of (x, y) to a·x + b·y + c = 0 (any scale of (a, b, c)); INFINITY when
 /// a = b = 0.
@@ -34,7 +34,7 @@ impl Estimator for LineEstimator {
         2
     }
 
-    fn fit(&self, points: &[[f64; 2]], weights: &[f64]) -> Result<[f64; 3], String> {
+    fn fit(&self, points: &[[f64; 2]], weights: &[f64]) -> Result<[f64; 3], GeometryError> {
         let (mut sw, mut sx, mut sy) = (0.0, 0.0, 0.0);
         for (p, &w) in points.iter().zip(weights) {
             sw += w;
@@ -42,7 +42,7 @@ impl Estimator for LineEstimator {
             sy += w * p[1];
         }
         if !(sw > 0.0) {
-            return Err("no points with weight".into());
+            return Err(GeometryError::NoWeightedPoints);
         }
         let (mx, my) = (sx / sw, sy / sw);
         let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
@@ -54,7 +54,7 @@ impl Estimator for LineEstimator {
         }
         let (sxx, sxy, syy) = (sxx / sw, sxy / sw, syy / sw);
         if is_coincident((sxx + syy).sqrt(), mx.abs() + my.abs()) {
-            return Err("all points coincide".into());
+            return Err(GeometryError::Coincident);
         }
         let (_, _, direction) = sym2_eigen(sxx, sxy, syy);
         let (mut a, mut b) = (-direction.sin(), direction.cos());

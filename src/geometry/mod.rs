@@ -256,31 +256,122 @@ pub fn fit_type(type_name: &str, rows: &[&[f64]]) -> Option<Fit> {
     select::fit_one(type_name, rows)
 }
 
+/// Why a group's rows do not determine a model of a type. Its text is the `reason` of
+/// [`Model::Degenerate`] (part of the JSON API: keep the messages as they are).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GeometryError {
+    // The rows themselves ([`validate`]).
+    #[error("no points")]
+    NoPoints,
+    #[error("rows have {width} values, expected {expected}")]
+    WrongWidth { width: usize, expected: usize },
+    #[error("rows have {width} values: a trajectory holds 2F ≥ 4 (F frames)")]
+    TrajectoryWidth { width: usize },
+    #[error("row {row} has {found} values, row 0 has {expected}")]
+    Ragged {
+        row: usize,
+        found: usize,
+        expected: usize,
+    },
+    #[error("row {row} holds a non-finite value")]
+    NonFinite { row: usize },
+    #[error("row {row} holds a value beyond ±{max:e}", max = MAX_COORDINATE)]
+    TooLarge { row: usize },
+    /// A name [`fit_type`] does not know (never reaches an answer: unknown names give `None`).
+    #[error("unknown model type {0:?}")]
+    UnknownType(String),
+
+    // Too few points, or no weight on them.
+    #[error("{n} points, at least {min} needed")]
+    TooFewPoints { n: usize, min: usize },
+    #[error("{n} correspondences, at least {min} needed")]
+    TooFewCorrespondences { n: usize, min: usize },
+    #[error("fewer than {min} correspondences")]
+    FewerCorrespondences { min: usize },
+    #[error("{n} trajectories, at least {min} needed")]
+    TooFewTrajectories { n: usize, min: usize },
+    #[error("no points with weight")]
+    NoWeightedPoints,
+    #[error("no trajectories with weight")]
+    NoWeightedTrajectories,
+
+    // Points in special position.
+    #[error("all points coincide")]
+    Coincident,
+    #[error("all points of image {image} coincide")]
+    CoincidentImage { image: u8 },
+    #[error("all trajectories coincide")]
+    CoincidentTrajectories,
+    #[error("points are collinear")]
+    Collinear,
+    #[error("points of image {image} are collinear")]
+    CollinearImage { image: u8 },
+
+    // Conics.
+    #[error("no circle fits the points")]
+    NoCircle,
+    #[error("points are nearly collinear (circle radius {radius:.3e} × their spread)")]
+    FlatCircle { radius: f64 },
+    #[error("points do not determine a conic")]
+    NoConic,
+    #[error("fewer than 5 points in general position: the conic is not determined")]
+    ConicUndetermined,
+    #[error("no ellipse fits the points")]
+    NoEllipse,
+    #[error("no ellipse fits the points (the best conic is not a real ellipse)")]
+    NotRealEllipse,
+    #[error("points are nearly collinear (ellipse axis {axis:.3e} × their spread)")]
+    FlatEllipse { axis: f64 },
+
+    // Two-view models.
+    #[error("correspondences do not determine a homography (fewer than 4 in general position)")]
+    HomographyUndetermined,
+    #[error("no homography fits")]
+    NoHomography,
+    #[error("the homography is singular")]
+    SingularHomography,
+    #[error("the affine map is singular")]
+    SingularAffine,
+    #[error(
+        "correspondences do not determine a fundamental matrix (planar scene, pure rotation or pure image translation: a homography explains them)"
+    )]
+    FundamentalUndetermined,
+    #[error("no fundamental matrix fits")]
+    NoFundamental,
+}
+
 /// Checks the rows of one group: at least one; all of width `width` (or, for `None`,
 /// trajectories: one even width ≥ 4); every value finite and within ±[`MAX_COORDINATE`].
-fn validate(rows: &[&[f64]], width: Option<usize>) -> Result<(), String> {
+fn validate(rows: &[&[f64]], width: Option<usize>) -> Result<(), GeometryError> {
     let Some(first) = rows.first() else {
-        return Err("no points".into());
+        return Err(GeometryError::NoPoints);
     };
     let w = first.len();
     match width {
-        Some(want) if w != want => return Err(format!("rows have {w} values, expected {want}")),
+        Some(want) if w != want => {
+            return Err(GeometryError::WrongWidth {
+                width: w,
+                expected: want,
+            });
+        }
         None if w < 4 || w % 2 == 1 => {
-            return Err(format!(
-                "rows have {w} values: a trajectory holds 2F ≥ 4 (F frames)"
-            ));
+            return Err(GeometryError::TrajectoryWidth { width: w });
         }
         _ => {}
     }
     for (i, row) in rows.iter().enumerate() {
         if row.len() != w {
-            return Err(format!("row {i} has {} values, row 0 has {w}", row.len()));
+            return Err(GeometryError::Ragged {
+                row: i,
+                found: row.len(),
+                expected: w,
+            });
         }
         if row.iter().any(|v| !v.is_finite()) {
-            return Err(format!("row {i} holds a non-finite value"));
+            return Err(GeometryError::NonFinite { row: i });
         }
         if row.iter().any(|v| v.abs() > MAX_COORDINATE) {
-            return Err(format!("row {i} holds a value beyond ±{MAX_COORDINATE:e}"));
+            return Err(GeometryError::TooLarge { row: i });
         }
     }
     Ok(())
@@ -612,6 +703,39 @@ mod tests {
             };
             assert_eq!(bits(&a), bits(&b), "bit for bit");
         }
+    }
+
+    #[test]
+    fn error_texts_are_the_degenerate_reasons() {
+        // The text is the wire's `reason`: these are the messages as they were written.
+        for (e, text) in [
+            (
+                GeometryError::TooLarge { row: 2 },
+                "row 2 holds a value beyond ±1e150",
+            ),
+            (
+                GeometryError::FlatCircle { radius: 12345.678 },
+                "points are nearly collinear (circle radius 1.235e4 × their spread)",
+            ),
+            (
+                GeometryError::FundamentalUndetermined,
+                "correspondences do not determine a fundamental matrix (planar scene, pure \
+                 rotation or pure image translation: a homography explains them)",
+            ),
+            (
+                GeometryError::CollinearImage { image: 2 },
+                "points of image 2 are collinear",
+            ),
+        ] {
+            assert_eq!(e.to_string(), text);
+        }
+        let f = fit_type("homography", &[&[1.0, 2.0][..]]).unwrap();
+        assert_eq!(
+            f.model,
+            Model::Degenerate {
+                reason: "rows have 2 values, expected 4".into()
+            }
+        );
     }
 
     #[test]

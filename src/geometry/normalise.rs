@@ -3,6 +3,7 @@
 //! from it to √2. Estimation runs in normalised coordinates; parameters go back to the caller's
 //! units with the inverse transform.
 
+use super::GeometryError;
 use super::linalg::{Mat3, norm2, sym2_eigen};
 
 /// x̂ = k·(x − m), one per image.
@@ -134,12 +135,12 @@ pub struct TwoView {
 impl TwoView {
     /// Normalises each image by its points of positive weight. `Err` when the points of one
     /// image coincide.
-    pub fn new(points: &[[f64; 4]], weights: &[f64]) -> Result<Self, String> {
+    pub fn new(points: &[[f64; 4]], weights: &[f64]) -> Result<Self, GeometryError> {
         let w = weights.iter().copied();
         let t1 = Similarity::hartley(points.iter().map(|p| [p[0], p[1]]).zip(w.clone()))
-            .ok_or("all points of image 1 coincide")?;
+            .ok_or(GeometryError::CoincidentImage { image: 1 })?;
         let t2 = Similarity::hartley(points.iter().map(|p| [p[2], p[3]]).zip(w))
-            .ok_or("all points of image 2 coincide")?;
+            .ok_or(GeometryError::CoincidentImage { image: 2 })?;
         let q1 = points.iter().map(|p| t1.apply([p[0], p[1]])).collect();
         let q2 = points.iter().map(|p| t2.apply([p[2], p[3]])).collect();
         Ok(Self { t1, t2, q1, q2 })

@@ -20,6 +20,7 @@
 //! not make σ = 0 and every point but the exact ones an outlier through round-off. No
 //! randomness: the same rows give the same fit, bit for bit.
 
+use super::GeometryError;
 use super::linalg::median;
 
 /// Cauchy weight constant, in units of σ.
@@ -49,7 +50,7 @@ pub trait Estimator {
     }
     /// Weighted least-squares fit; a zero weight drops the point. `Err` with a readable reason
     /// when the weighted points do not determine a model.
-    fn fit(&self, points: &[Self::Point], weights: &[f64]) -> Result<Self::Params, String>;
+    fn fit(&self, points: &[Self::Point], weights: &[f64]) -> Result<Self::Params, GeometryError>;
     /// Geometric refinement of `params` on the points of positive weight (identity when the
     /// least-squares fit is already geometric).
     fn refine(&self, params: Self::Params, points: &[Self::Point], weights: &[f64])
@@ -167,7 +168,7 @@ pub fn fit_robust<E: Estimator>(
     est: &E,
     points: &[E::Point],
     scale: f64,
-) -> Result<Robust<E::Params>, String> {
+) -> Result<Robust<E::Params>, GeometryError> {
     let unrefined = fit_unrefined(est, points, scale)?;
     Ok(refine_robust(est, points, unrefined, scale))
 }
@@ -179,10 +180,13 @@ pub fn fit_unrefined<E: Estimator>(
     est: &E,
     points: &[E::Point],
     scale: f64,
-) -> Result<Robust<E::Params>, String> {
+) -> Result<Robust<E::Params>, GeometryError> {
     let n = points.len();
     if n < est.min_points() {
-        return Err(format!("{n} points, at least {} needed", est.min_points()));
+        return Err(GeometryError::TooFewPoints {
+            n,
+            min: est.min_points(),
+        });
     }
     let floor = sigma_floor(scale);
     let mut weights = vec![1.0; n];
@@ -323,10 +327,10 @@ mod tests {
         fn min_points(&self) -> usize {
             1
         }
-        fn fit(&self, points: &[f64], weights: &[f64]) -> Result<f64, String> {
+        fn fit(&self, points: &[f64], weights: &[f64]) -> Result<f64, GeometryError> {
             let sw: f64 = weights.iter().sum();
             if sw <= 0.0 {
-                return Err("no weight".into());
+                return Err(GeometryError::NoWeightedPoints);
             }
             Ok(points.iter().zip(weights).map(|(p, w)| p * w).sum::<f64>() / sw)
         }

@@ -53,7 +53,7 @@ use super::robust::{
     Estimator, INLIER_SIGMAS, Robust, SIGMA_FLOOR, fit_robust, fit_unrefined, refine_robust,
 };
 use super::subspace::{fit_subspace, subspace_model};
-use super::{Family, Fit, Model, validate};
+use super::{Family, Fit, GeometryError, Model, validate};
 
 /// A fitted candidate: the answer and the distance of every row to it in the data space
 /// (what GRIC scores).
@@ -81,7 +81,7 @@ fn robust<E: Estimator>(
     est: &E,
     points: &[E::Point],
     scale: f64,
-) -> Result<Robust<E::Params>, String> {
+) -> Result<Robust<E::Params>, GeometryError> {
     fit_robust(est, points, scale)
 }
 
@@ -104,7 +104,7 @@ fn spread(points: impl Iterator<Item = [f64; 2]> + Clone) -> f64 {
         .sqrt()
 }
 
-fn curve(name: &str, pts: &[[f64; 2]]) -> Option<Result<Candidate, String>> {
+fn curve(name: &str, pts: &[[f64; 2]]) -> Option<Result<Candidate, GeometryError>> {
     let scale = spread(pts.iter().copied());
     Some(match name {
         "line" => {
@@ -133,7 +133,7 @@ enum TwoViewFit {
 
 impl TwoViewFit {
     /// The unrefined robust fit of one named type; `None` for an unknown name.
-    fn new(name: &str, pts: &[[f64; 4]], scale: f64) -> Option<Result<Self, String>> {
+    fn new(name: &str, pts: &[[f64; 4]], scale: f64) -> Option<Result<Self, GeometryError>> {
         Some(match name {
             "affine" => fit_unrefined(&AffineEstimator, pts, scale).map(Self::Affine),
             "homography" => fit_unrefined(&HomographyEstimator, pts, scale).map(Self::Homography),
@@ -186,13 +186,13 @@ impl TwoViewFit {
 }
 
 /// The rows as 2-D points (validated width 2).
-fn points2(rows: &[&[f64]]) -> Result<Vec<[f64; 2]>, String> {
+fn points2(rows: &[&[f64]]) -> Result<Vec<[f64; 2]>, GeometryError> {
     validate(rows, Some(2))?;
     Ok(rows.iter().map(|r| [r[0], r[1]]).collect())
 }
 
 /// The rows as correspondences (validated width 4).
-fn points4(rows: &[&[f64]]) -> Result<Vec<[f64; 4]>, String> {
+fn points4(rows: &[&[f64]]) -> Result<Vec<[f64; 4]>, GeometryError> {
     validate(rows, Some(4))?;
     Ok(rows.iter().map(|r| [r[0], r[1], r[2], r[3]]).collect())
 }
@@ -213,12 +213,14 @@ pub fn degenerate(reason: impl Into<String>, n: usize) -> Fit {
 pub fn fit_one(type_name: &str, rows: &[&[f64]]) -> Option<Fit> {
     let n = rows.len();
     let outcome = match type_name {
-        "line" | "circle" | "ellipse" => {
-            points2(rows).and_then(|p| curve(type_name, &p).unwrap_or(Err(String::new())))
-        }
+        "line" | "circle" | "ellipse" => points2(rows).and_then(|p| {
+            curve(type_name, &p)
+                .unwrap_or_else(|| Err(GeometryError::UnknownType(type_name.into())))
+        }),
         "homography" | "affine" | "fundamental" => points4(rows).and_then(|p| {
             let scale = two_view_scale(&p);
-            let fit = TwoViewFit::new(type_name, &p, scale).unwrap_or(Err(String::new()))?;
+            let fit = TwoViewFit::new(type_name, &p, scale)
+                .unwrap_or_else(|| Err(GeometryError::UnknownType(type_name.into())))?;
             Ok(Candidate {
                 name: "",
                 fit: fit.refined(&p, scale),
@@ -232,7 +234,7 @@ pub fn fit_one(type_name: &str, rows: &[&[f64]]) -> Option<Fit> {
     };
     Some(match outcome {
         Ok(c) => c.fit,
-        Err(reason) => degenerate(reason, n),
+        Err(reason) => degenerate(reason.to_string(), n),
     })
 }
 
@@ -324,7 +326,7 @@ pub fn fit_family(family: Family, rows: &[&[f64]]) -> Fit {
         Family::Curves => {
             let pts = match points2(rows) {
                 Ok(p) => p,
-                Err(reason) => return degenerate(reason, n),
+                Err(reason) => return degenerate(reason.to_string(), n),
             };
             let scale = spread(pts.iter().copied());
             let (mut ok, mut err) =
@@ -360,7 +362,7 @@ fn fit_two_view(family: Family, rows: &[&[f64]]) -> Fit {
     let n = rows.len();
     let pts = match points4(rows) {
         Ok(p) => p,
-        Err(reason) => return degenerate(reason, n),
+        Err(reason) => return degenerate(reason.to_string(), n),
     };
     let scale = two_view_scale(&pts);
     let (mut fitted, mut errors) = (Vec::new(), Vec::new());
@@ -385,7 +387,7 @@ fn fit_two_view(family: Family, rows: &[&[f64]]) -> Fit {
 /// Runs each named candidate; the fitted ones in order, and the reasons of the others.
 fn run_all(
     names: &[&str],
-    run: impl Fn(&str) -> Option<Result<Candidate, String>>,
+    run: impl Fn(&str) -> Option<Result<Candidate, GeometryError>>,
 ) -> (Vec<Candidate>, Vec<String>) {
     let (mut ok, mut err) = (Vec::new(), Vec::new());
     for name in names {

@@ -25,9 +25,9 @@
 
 use std::marker::PhantomData;
 
-use super::Model;
 use super::linalg::{median, sym_eigen, top_eigen};
 use super::robust::{Estimator, Robust, SIGMA_FLOOR, evaluate, fit_robust};
+use super::{GeometryError, Model};
 
 /// Above this many coordinates (2F), the scatter's top directions come from orthogonal
 /// iteration ([`top_eigen`]) rather than a full eigen-decomposition.
@@ -70,12 +70,16 @@ type Principal = (Vec<f64>, Vec<Vec<f64>>, Vec<f64>);
 /// largest eigenvalues of the weighted scatter, descending (all of them for small blocks, the
 /// top `max_rank` for large ones).
 /// `Err` when the weighted tracks all coincide.
-fn principal(tracks: &[&[f64]], weights: &[f64], max_rank: usize) -> Result<Principal, String> {
+fn principal(
+    tracks: &[&[f64]],
+    weights: &[f64],
+    max_rank: usize,
+) -> Result<Principal, GeometryError> {
     let d = tracks.first().map_or(0, |t| t.len());
     let active: Vec<usize> = (0..tracks.len()).filter(|&i| weights[i] > 0.0).collect();
     let sw: f64 = active.iter().map(|&i| weights[i]).sum();
     if active.is_empty() || !(sw > 0.0) {
-        return Err("no trajectories with weight".into());
+        return Err(GeometryError::NoWeightedTrajectories);
     }
     let mut mean = vec![0.0; d];
     for &i in &active {
@@ -148,7 +152,7 @@ fn principal(tracks: &[&[f64]], weights: &[f64], max_rank: usize) -> Result<Prin
     let top = values.first().copied().unwrap_or(0.0);
     let magnitude = mean.iter().map(|v| v.abs()).fold(0.0, f64::max);
     if !(top > 0.0) || top.sqrt() <= 1e-12 * magnitude * sw.sqrt() {
-        return Err("all trajectories coincide".into());
+        return Err(GeometryError::CoincidentTrajectories);
     }
     // Directions of (numerically) zero variance carry no information: drop them.
     let useful = values.iter().take_while(|&&v| v > 1e-24 * top).count();
@@ -209,7 +213,7 @@ fn chi2_median(k: usize) -> f64 {
 
 /// The rank of the tracks by the criterion of the module docs; `scale` is the residual
 /// scale that floors the noise.
-fn select_rank(tracks: &[&[f64]], scale: f64) -> Result<usize, String> {
+fn select_rank(tracks: &[&[f64]], scale: f64) -> Result<usize, GeometryError> {
     let n = tracks.len();
     let d = tracks[0].len();
     let r_max = MAX_RANK.min(n.saturating_sub(2)).min(d - 1).max(1);
@@ -248,7 +252,7 @@ impl<'a> Estimator for SubspaceEstimator<'a> {
         self.rank + 1
     }
 
-    fn fit(&self, points: &[&'a [f64]], weights: &[f64]) -> Result<SubspaceParams, String> {
+    fn fit(&self, points: &[&'a [f64]], weights: &[f64]) -> Result<SubspaceParams, GeometryError> {
         let (mean, basis, _) = principal(points, weights, self.rank)?;
         Ok(SubspaceParams { mean, basis })
     }
@@ -283,10 +287,10 @@ fn track_scale(tracks: &[&[f64]]) -> f64 {
 
 /// Fits the affine subspace of the tracks robustly, its rank chosen as in the module docs.
 /// Tracks must be validated (same even length ≥ 4, finite).
-pub fn fit_subspace(tracks: &[&[f64]]) -> Result<Robust<SubspaceParams>, String> {
+pub fn fit_subspace(tracks: &[&[f64]]) -> Result<Robust<SubspaceParams>, GeometryError> {
     let n = tracks.len();
     if n < 3 {
-        return Err(format!("{n} trajectories, at least 3 needed"));
+        return Err(GeometryError::TooFewTrajectories { n, min: 3 });
     }
     let scale = track_scale(tracks);
     // A first rank on all tracks, at most the rigid-motion rank 3: a higher one would let the

@@ -8,15 +8,46 @@ use serde::{Deserialize, Serialize};
 use super::RegistryError;
 use crate::cluster::Selection;
 use crate::data::frames::FrameSampling;
-use crate::data::symmetry;
+use crate::data::symmetry::{self, SymmetryError};
 use crate::data::{Kind, Normalization, PointSet, Symmetry};
 use crate::geometry::Family;
 use crate::loss::Loss;
-use crate::model::ModelConfig;
+use crate::model::{ModelConfig, ModelError};
 
 /// File names inside a model directory.
 pub const CARD_FILE: &str = "model.json";
 pub const WEIGHTS_FILE: &str = "weights.safetensors";
+
+/// Why a model card is not internally consistent ([`ModelCard::validate`]).
+#[derive(Debug, thiserror::Error)]
+pub enum CardError {
+    #[error("name {0:?} must be non-empty ASCII letters, digits, '-' or '_'")]
+    Name(String),
+    #[error("input_dim {input_dim} differs from architecture.input_dim {architecture}")]
+    InputDim {
+        input_dim: usize,
+        architecture: usize,
+    },
+    #[error("input_dim {input_dim} is not valid for kind {kind}")]
+    InputDimForKind { input_dim: usize, kind: Kind },
+    #[error("normalization {normalization:?} is not the one kind {kind} uses")]
+    Normalization {
+        normalization: Normalization,
+        kind: Kind,
+    },
+    #[error("k_max must be at least 1")]
+    KMax,
+    #[error("the default selection must be sod or silhouette")]
+    FixedSelection,
+    #[error("test_symmetries: {0}")]
+    TestSymmetries(SymmetryError),
+    #[error("members: weights {0:?} must be a plain .safetensors file name")]
+    MemberFile(String),
+    #[error("members: weights {0:?} named twice")]
+    MemberTwice(String),
+    #[error(transparent)]
+    Architecture(ModelError),
+}
 
 /// How a model was trained: enough to reproduce it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -206,57 +237,53 @@ impl ModelCard {
     }
 
     /// Checks the card is internally consistent.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), CardError> {
         if self.name.is_empty()
             || !self
                 .name
                 .chars()
                 .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
         {
-            return Err(format!(
-                "name {:?} must be non-empty ASCII letters, digits, '-' or '_'",
-                self.name
-            ));
+            return Err(CardError::Name(self.name.clone()));
         }
         if self.input_dim != self.architecture.input_dim {
-            return Err(format!(
-                "input_dim {} differs from architecture.input_dim {}",
-                self.input_dim, self.architecture.input_dim
-            ));
+            return Err(CardError::InputDim {
+                input_dim: self.input_dim,
+                architecture: self.architecture.input_dim,
+            });
         }
         if !self.kind.accepts_dim(self.input_dim) {
-            return Err(format!(
-                "input_dim {} is not valid for kind {}",
-                self.input_dim, self.kind
-            ));
+            return Err(CardError::InputDimForKind {
+                input_dim: self.input_dim,
+                kind: self.kind,
+            });
         }
         if self.normalization != Normalization::for_kind(self.kind) {
-            return Err(format!(
-                "normalization {:?} is not the one kind {} uses",
-                self.normalization, self.kind
-            ));
+            return Err(CardError::Normalization {
+                normalization: self.normalization,
+                kind: self.kind,
+            });
         }
         if self.k_max == 0 {
-            return Err("k_max must be at least 1".into());
+            return Err(CardError::KMax);
         }
         if matches!(self.selection, Selection::Fixed(_)) {
-            return Err("the default selection must be sod or silhouette".into());
+            return Err(CardError::FixedSelection);
         }
-        symmetry::check(&self.test_symmetries, self.kind)
-            .map_err(|e| format!("test_symmetries: {e}"))?;
+        symmetry::check(&self.test_symmetries, self.kind).map_err(CardError::TestSymmetries)?;
         let files: Vec<&str> = self.weight_files().collect();
         for (i, file) in files.iter().enumerate().skip(1) {
             let plain = Path::new(file).file_name() == Some(file.as_ref());
             if !plain || !file.ends_with(".safetensors") {
-                return Err(format!(
-                    "members: weights {file:?} must be a plain .safetensors file name"
-                ));
+                return Err(CardError::MemberFile(file.to_string()));
             }
             if files[..i].contains(file) {
-                return Err(format!("members: weights {file:?} named twice"));
+                return Err(CardError::MemberTwice(file.to_string()));
             }
         }
-        self.architecture.validate().map_err(|e| e.to_string())
+        self.architecture
+            .validate()
+            .map_err(CardError::Architecture)
     }
 
     /// The weight files of the model's networks, relative to its directory: the card's own
@@ -275,8 +302,10 @@ impl ModelCard {
             path: path.clone(),
             reason: e.to_string(),
         })?;
-        card.validate()
-            .map_err(|reason| RegistryError::Card { path, reason })?;
+        card.validate().map_err(|e| RegistryError::Card {
+            path,
+            reason: e.to_string(),
+        })?;
         Ok(card)
     }
 
@@ -331,7 +360,12 @@ mod tests {
     fn cards_refuse_symmetries_that_do_not_apply() {
         let mut card = tiny(vec![]).card;
         card.test_symmetries = vec![Symmetry::Mirror, Symmetry::Mirror];
-        assert!(card.validate().unwrap_err().contains("repeated"));
+        assert!(
+            card.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("repeated")
+        );
         card.kind = Kind::Points2d;
         card.input_dim = 2;
         card.architecture.input_dim = 2;
@@ -340,6 +374,7 @@ mod tests {
         assert!(
             card.validate()
                 .unwrap_err()
+                .to_string()
                 .contains("does not apply to points2d")
         );
         card.test_symmetries = vec![Symmetry::Mirror];

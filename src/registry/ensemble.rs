@@ -79,9 +79,9 @@ pub fn write_ensemble(
             training: c.training.clone(),
         })
         .collect();
-    card.validate().map_err(|reason| RegistryError::Card {
+    card.validate().map_err(|e| RegistryError::Card {
         path: out.join(CARD_FILE),
-        reason,
+        reason: e.to_string(),
     })?;
     let io = |path: &Path| {
         let path = path.to_path_buf();
@@ -220,7 +220,12 @@ mod tests {
             assert!(card.validate().is_err(), "{bad}");
         }
         card.members = vec![member("w1.safetensors"), member("w1.safetensors")];
-        assert!(card.validate().unwrap_err().contains("named twice"));
+        assert!(
+            card.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("named twice")
+        );
         card.members = vec![member("w1.safetensors"), member("w2.safetensors")];
         card.validate().unwrap();
     }

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 use crate::model::ModelError;
 
 pub use card::{
-    CARD_FILE, Member, MetricRecord, ModelCard, Observed, TrainingInfo, ValidatedRange,
+    CARD_FILE, CardError, Member, MetricRecord, ModelCard, Observed, TrainingInfo, ValidatedRange,
     WEIGHTS_FILE, card_for,
 };
 pub use ensemble::write_ensemble;

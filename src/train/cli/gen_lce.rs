@@ -9,20 +9,20 @@ use crate::data::synthetic::{LceSpec, parse_range};
 
 /// `--points-per-shape`: `N`, or `MIN-MAX` (the count of each structure drawn in that range).
 pub fn points_per_shape(text: &str) -> Result<(usize, Option<usize>), CliError> {
-    parse_range::<usize>(text).map_err(|reason| CliError::FlagValue {
+    parse_range::<usize>(text).map_err(|e| CliError::FlagValue {
         flag: "--points-per-shape",
         value: text.to_string(),
-        reason,
+        reason: e.to_string(),
     })
 }
 
 /// `--arc`: the span of partial arcs in degrees, `MIN-MAX` or one value; `None`: whole shapes.
 pub fn arc(text: Option<&str>) -> Result<Option<[f64; 2]>, CliError> {
     let Some(text) = text else { return Ok(None) };
-    let (lo, hi) = parse_range::<f64>(text).map_err(|reason| CliError::FlagValue {
+    let (lo, hi) = parse_range::<f64>(text).map_err(|e| CliError::FlagValue {
         flag: "--arc",
         value: text.to_string(),
-        reason,
+        reason: e.to_string(),
     })?;
     Ok(Some([lo, hi.unwrap_or(lo)]))
 }

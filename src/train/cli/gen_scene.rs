@@ -102,10 +102,10 @@ where
     let Some(text) = text else {
         return Ok(default);
     };
-    let (lo, hi) = parse_range::<T>(text).map_err(|reason| CliError::FlagValue {
+    let (lo, hi) = parse_range::<T>(text).map_err(|e| CliError::FlagValue {
         flag,
         value: text.to_string(),
-        reason,
+        reason: e.to_string(),
     })?;
     Ok([lo, hi.unwrap_or(lo)])
 }

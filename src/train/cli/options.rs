@@ -186,7 +186,10 @@ impl TrainArgs {
 /// Refuses symmetries that are repeated or have no image for `kind` (reverse for points2d),
 /// rather than skipping them silently; the error names `flag`.
 pub fn check_symmetries(flag: &'static str, list: &[Symmetry], kind: Kind) -> Result<(), CliError> {
-    crate::data::symmetry::check(list, kind).map_err(|reason| CliError::Flag { flag, reason })
+    crate::data::symmetry::check(list, kind).map_err(|e| CliError::Flag {
+        flag,
+        reason: e.to_string(),
+    })
 }
 
 #[cfg(test)]
