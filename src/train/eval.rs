@@ -101,9 +101,11 @@ fn score(
         },
         Some(r) => {
             let refined = pipeline::refine(model, &sample.points, &clustering, r);
-            let (labels, k) = outliers_as_group(&refined.labels, refined.structures.len());
+            let (labels, _) = outliers_as_group(&refined.labels, refined.structures.len());
             Score {
-                k,
+                // The structures found, and the outlier group where the sample has one (its
+                // `k` counts it): points flagged on a clean sample cost error, not a K.
+                k: refined.structures.len() + usize::from(sample.outliers),
                 error: error_rate(&sample.labels, &labels),
                 nmi: nmi(&sample.labels, &labels),
                 outliers: sample.outliers.then(|| {
@@ -287,13 +289,10 @@ mod tests {
         assert!((0.0..=1.0).contains(&o.precision) && (0.0..=1.0).contains(&o.recall));
         let t = totals(std::slice::from_ref(&row));
         assert_eq!(t.known.outliers, Some(o));
-        assert!(
-            evaluate_sample(&model, &without, &s)
-                .unwrap()
-                .known
-                .outliers
-                .is_none()
-        );
+        let clean = evaluate_sample(&model, &without, &s).unwrap();
+        assert!(clean.known.outliers.is_none());
+        // K counts structures: points flagged on a clean sample are not one more group.
+        assert!(clean.known.k <= without.k, "{clean:?}");
         let plain = EvalSettings { refine: None, ..s };
         assert!(
             evaluate_sample(&model, &with, &plain)
