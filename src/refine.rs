@@ -22,9 +22,10 @@
 //! (each 1.4826 × the median residual inside its group, [`geometry::Fit::sigma`]): the sensor's
 //! noise, shared by every structure, and not moved by one group of outliers. τ = [`OUTLIER_SIGMAS`]
 //! × σ, or the caller's `outlier_threshold`. A learned group whose robust fit explains less than
-//! [`OUTLIER_GROUP_INLIERS`] of its points follows no model: it is the outlier group that models
-//! trained with outliers as one more group learn (AdelaideRMF), and it is dissolved: its points go
-//! to a structure they fit, or become outliers.
+//! [`OUTLIER_GROUP_INLIERS`] of its points, or whose own noise level exceeds
+//! [`OUTLIER_GROUP_SIGMAS`] × σ, follows no model: it is the outlier group that models trained
+//! with outliers as one more group learn (AdelaideRMF), and it is dissolved: its points go to a
+//! structure they fit, or become outliers.
 //!
 //! **Merging.** When K was chosen automatically, two structures whose union one model of the
 //! same family fits with a noise level within [`MERGE_SIGMAS`] × σ are one structure seen twice
@@ -43,6 +44,9 @@ pub const OUTLIER_SIGMAS: f64 = 3.0;
 /// A learned group whose own model explains less than this share of its points follows no
 /// model: an outlier group.
 pub const OUTLIER_GROUP_INLIERS: f64 = 0.5;
+/// A learned group whose own noise level exceeds this many times the fit's σ is spread over the
+/// plane (or the images), not along a model: an outlier group too.
+pub const OUTLIER_GROUP_SIGMAS: f64 = 3.0;
 /// Two structures whose joint fit is within this many σ merge.
 pub const MERGE_SIGMAS: f64 = 1.5;
 
@@ -145,6 +149,7 @@ pub fn refine(
             let explained = |g: &Group| {
                 let inliers = g.fit.inliers.iter().filter(|&&v| v).count();
                 inliers as f64 >= OUTLIER_GROUP_INLIERS * g.start as f64
+                    && g.fit.sigma <= OUTLIER_GROUP_SIGMAS * sigma
             };
             if g.as_ref().is_some_and(|g| !g.frozen && !explained(g)) {
                 *g = None;
