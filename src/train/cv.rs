@@ -126,6 +126,9 @@ pub struct CvSpec {
     pub test_symmetries: Vec<Symmetry>,
     pub eval: EvalSettings,
     pub out: PathBuf,
+    /// Weights every fold starts from (a pretrained model of the same architecture), instead of
+    /// a fresh initialisation.
+    pub init: Option<PathBuf>,
 }
 
 fn fold_path(out: &Path, name: &str) -> PathBuf {
@@ -169,7 +172,11 @@ pub fn run_fold(
         Normalization::for_kind(kind),
         spec.train.model.neighbors,
     );
-    let outcome = train(&spec.train, &prepared, &[], Hooks::default())?;
+    let hooks = Hooks {
+        init: spec.init.as_deref(),
+        ..Hooks::default()
+    };
+    let outcome = train(&spec.train, &prepared, &[], hooks)?;
     let info = TrainingInfo {
         data: match spec.samples.protocol {
             Protocol::AugmentLeaky => format!("fold of {name}, with its clips after the test clip"),

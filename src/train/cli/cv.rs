@@ -30,6 +30,10 @@ pub struct CvJob {
     /// Run only this fold (used by --jobs; also handy by hand).
     #[arg(long)]
     pub fold: Option<String>,
+    /// Start every fold from this trained model (same architecture; e.g. pretrained on
+    /// synthetic data) instead of a fresh initialisation.
+    #[arg(long)]
+    pub init: Option<PathBuf>,
     #[arg(long, default_value_t = 4)]
     pub restarts: usize,
 }
@@ -131,8 +135,15 @@ pub fn run(job: &CvJob, stop: &AtomicBool) -> Result<Option<CvSummary>, CliError
         .points
         .dim();
     check_symmetries("--test-symmetry", &job.train.test_symmetry, kind)?;
+    let config = job.train.config(input_dim)?;
+    let init = job
+        .init
+        .as_deref()
+        .map(|dir| super::card::init_card(dir, &config).map(|(weights, _)| weights))
+        .transpose()?;
     let spec = CvSpec {
-        train: job.train.config(input_dim)?,
+        train: config,
+        init,
         samples,
         test_symmetries: job.train.test_symmetry.clone(),
         eval: EvalSettings {
