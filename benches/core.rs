@@ -280,17 +280,20 @@ fn main() {
     ];
     for (name, points, labels, family) in &sets {
         let k = labels.iter().max().map_or(0, |m| m + 1);
-        let ms = median_ms(reps, || {
-            std::hint::black_box(refine(
-                points,
-                labels,
-                k,
-                *family,
-                &RefineParams::default(),
-                true,
-            ));
-        });
-        println!("refine   N={:>5}  {name:<26}: {ms:>8.2} ms", points.len());
+        // K chosen automatically (structures may merge), and a caller's K.
+        for (auto_k, how) in [(true, "K chosen"), (false, "K given")] {
+            let ms = median_ms(reps, || {
+                std::hint::black_box(refine(
+                    points,
+                    labels,
+                    k,
+                    *family,
+                    &RefineParams::default(),
+                    auto_k,
+                ));
+            });
+            println!("refine   N={:>5}  {name:<26}, {how}: {ms:>8.2} ms", points.len());
+        }
     }
 
     // The SVG picture of a 20000-point fit with four circle structures and a residual curve.

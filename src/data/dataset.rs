@@ -5,10 +5,11 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use super::motion::{MotionParamsError, MotionSpec};
+use super::motion::MotionSpec;
 use super::points::{ImageSize, InputError, Kind, PointSet};
+use super::ranges::RangeError;
 use super::synthetic::{LceConfigError, LceSpec};
-use super::twoview::{TwoViewParamsError, TwoViewSpec};
+use super::twoview::TwoViewSpec;
 
 /// Why a dataset file or directory could not be used. Every variant names the file.
 #[derive(Debug, thiserror::Error)]
@@ -62,10 +63,9 @@ pub enum SpecError {
     Count { count: usize, max: usize },
     #[error(transparent)]
     Lce(#[from] LceConfigError),
+    /// A motion or two-view generator setting out of range.
     #[error("{}", .0.for_spec())]
-    Motion(MotionParamsError),
-    #[error("{}", .0.for_spec())]
-    TwoView(TwoViewParamsError),
+    Setting(RangeError),
 }
 
 /// One sequence file as stored on disk.
@@ -271,6 +271,75 @@ pub fn renumber(raw: &[i64]) -> (Vec<usize>, usize) {
         .map(|l| distinct.binary_search(l).unwrap_or(0))
         .collect();
     (labels, distinct.len())
+}
+
+/// One `key=value` setting of a generator spec (`lce:`, `motion:`, `twoview:`); a value that
+/// does not parse is an error naming the key.
+pub(crate) struct Setting<'a> {
+    pub key: &'a str,
+    value: &'a str,
+}
+
+impl<'a> Setting<'a> {
+    pub fn parse(part: &'a str) -> Result<Self, SpecError> {
+        let (key, value) = part.split_once('=').ok_or_else(|| SpecError::NotKeyValue {
+            part: part.to_string(),
+        })?;
+        Ok(Self { key, value })
+    }
+
+    fn bad(&self, e: &dyn std::fmt::Display) -> SpecError {
+        SpecError::Value {
+            key: self.key.to_string(),
+            value: self.value.to_string(),
+            reason: e.to_string(),
+        }
+    }
+
+    /// The value as one `T`.
+    pub fn value<T: std::str::FromStr>(&self) -> Result<T, SpecError>
+    where
+        T::Err: std::fmt::Display,
+    {
+        self.value.parse().map_err(|e| self.bad(&e))
+    }
+
+    /// The value as `N` or `MIN-MAX`: `(N, None)` or `(MIN, Some(MAX))`.
+    pub fn range<T: std::str::FromStr>(&self) -> Result<(T, Option<T>), SpecError>
+    where
+        T::Err: std::fmt::Display,
+    {
+        super::synthetic::parse_range(self.value).map_err(|e| self.bad(&e))
+    }
+
+    /// The value as `[MIN, MAX]` (one value `N`: `[N, N]`).
+    pub fn pair<T: std::str::FromStr + Copy>(&self) -> Result<[T; 2], SpecError>
+    where
+        T::Err: std::fmt::Display,
+    {
+        let (a, b) = self.range::<T>()?;
+        Ok([a, b.unwrap_or(a)])
+    }
+}
+
+/// The spec count check every generator shares: 1 to `max` samples.
+pub(crate) fn check_count(count: usize, max: usize) -> Result<(), SpecError> {
+    if count == 0 || count > max {
+        return Err(SpecError::Count { count, max });
+    }
+    Ok(())
+}
+
+/// Generated files as validated sequences: exactly what loading them from disk gives.
+pub(crate) fn load_files(
+    files: impl Iterator<Item = SequenceFile>,
+) -> Result<Vec<Sequence>, DataError> {
+    files
+        .map(|file| {
+            let name = PathBuf::from(&file.name);
+            Sequence::from_file(file, &name)
+        })
+        .collect()
 }
 
 /// Where labelled sequences come from: a dataset file or directory, or samples generated in

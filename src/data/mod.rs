@@ -6,6 +6,7 @@ pub mod features;
 pub mod frames;
 pub mod motion;
 pub mod points;
+pub mod ranges;
 pub mod symmetry;
 pub mod synthetic;
 pub mod twoview;

@@ -84,9 +84,11 @@ use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal, StandardNormal, UnitBall, UnitSphere};
 
-use super::dataset::{DataError, Sample, Sequence, SequenceFile, SpecError};
+use super::dataset::{
+    DataError, Sample, Sequence, SequenceFile, Setting, SpecError, check_count, load_files,
+};
 use super::points::{ImageSize, Kind, PointSet};
-use super::synthetic::parse_range;
+use super::ranges::{RangeError, check_range, range_text};
 use crate::geometry::linalg::{IDENTITY3, Mat3, mat3_mul, mat3_transpose, mat3_vec, rodrigues};
 
 /// Nearest depth (world units) at which a point is seen.
@@ -119,47 +121,6 @@ pub const ATTEMPTS_PER_TRACK: usize = 50;
 pub const ATTEMPTS_EXTRA: usize = 1000;
 /// How many times a scene is redrawn at half the motion scale before draws are unlimited.
 pub const MAX_HALVINGS: u32 = 16;
-
-/// A generator setting that cannot be drawn from: the flag that sets it, its value and why.
-/// Its spec key (`motion:frames=...`) is the flag without the dashes ([`Self::key`]).
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum MotionParamsError {
-    /// A value outside what the generator accepts.
-    #[error("{flag} {value}: {reason}")]
-    OutOfRange {
-        flag: &'static str,
-        value: String,
-        reason: String,
-    },
-    /// A range whose smallest value exceeds its largest.
-    #[error("{flag} {value}: the smallest value ({min}) exceeds the largest ({max})")]
-    Inverted {
-        flag: &'static str,
-        value: String,
-        min: String,
-        max: String,
-    },
-}
-
-impl MotionParamsError {
-    /// The command-line flag of the setting (`--frames`).
-    pub fn flag(&self) -> &'static str {
-        match self {
-            Self::OutOfRange { flag, .. } | Self::Inverted { flag, .. } => flag,
-        }
-    }
-
-    /// Its key in a `motion:` spec (`frames`).
-    pub fn key(&self) -> &'static str {
-        &self.flag()[2..]
-    }
-
-    /// The message naming the spec key instead of the flag (`frames=1: ...`).
-    pub fn for_spec(&self) -> String {
-        let text = self.to_string();
-        format!("{}={}", self.key(), &text[self.flag().len() + 1..])
-    }
-}
 
 /// Generator settings: every field is an inclusive range `[min, max]` a sample draws its value
 /// from (see the module docs for the distributions and [`MotionParams::validate`] for the
@@ -203,44 +164,6 @@ impl Default for MotionParams {
     }
 }
 
-/// `A` for a range of one value, else `A-B`.
-pub(super) fn range_text<T: PartialEq + std::fmt::Display>([lo, hi]: [T; 2]) -> String {
-    if lo == hi {
-        lo.to_string()
-    } else {
-        format!("{lo}-{hi}")
-    }
-}
-
-/// Checks that `[lo, hi]` is ordered and inside `[min, max]` (an open upper end when
-/// `open_max`).
-fn check_range<T: PartialOrd + Copy + std::fmt::Display>(
-    flag: &'static str,
-    range: [T; 2],
-    allowed: (T, T, bool),
-    what: &str,
-) -> Result<(), MotionParamsError> {
-    let (min, max, open_max) = allowed;
-    let inside = |v: T| v >= min && if open_max { v < max } else { v <= max };
-    if !(inside(range[0]) && inside(range[1])) {
-        let close = if open_max { ")" } else { "]" };
-        return Err(MotionParamsError::OutOfRange {
-            flag,
-            value: range_text(range),
-            reason: format!("{what} must lie in [{min}, {max}{close}"),
-        });
-    }
-    if range[0] > range[1] {
-        return Err(MotionParamsError::Inverted {
-            flag,
-            value: range_text(range),
-            min: range[0].to_string(),
-            max: range[1].to_string(),
-        });
-    }
-    Ok(())
-}
-
 impl MotionParams {
     /// Most frames a clip may have.
     pub const MAX_FRAMES: usize = 100;
@@ -258,7 +181,7 @@ impl MotionParams {
     pub const MAX_ROWS: usize = 10_000_000;
 
     /// Checks the settings a generator can draw from; the error names the flag.
-    pub fn validate(&self) -> Result<(), MotionParamsError> {
+    pub fn validate(&self) -> Result<(), RangeError> {
         check_range(
             "--frames",
             self.frames,
@@ -291,7 +214,7 @@ impl MotionParams {
         )?;
         let scale = self.motion_scale;
         if !(scale[0] > 0.0 && scale[1] > 0.0) {
-            return Err(MotionParamsError::OutOfRange {
+            return Err(RangeError::OutOfRange {
                 flag: "--motion-scale",
                 value: range_text(scale),
                 reason: "the motion scale must lie in (0, 10]".into(),
@@ -303,7 +226,7 @@ impl MotionParams {
         check_range("--height", self.height, (64.0, 1e5, false), "height (px)")?;
         let side = self.width[0].min(self.height[0]).round();
         if self.noise[1] * Self::NOISE_TO_IMAGE > side {
-            return Err(MotionParamsError::OutOfRange {
+            return Err(RangeError::OutOfRange {
                 flag: "--noise",
                 value: range_text(self.noise),
                 reason: format!(
@@ -316,7 +239,7 @@ impl MotionParams {
         let inliers = (self.motions[1] * self.points[1]) as f64;
         let rows = inliers + (self.outliers[1] / (1.0 - self.outliers[1]) * inliers).round();
         if rows > Self::MAX_ROWS as f64 {
-            return Err(MotionParamsError::OutOfRange {
+            return Err(RangeError::OutOfRange {
                 flag: "--outliers",
                 value: range_text(self.outliers),
                 reason: format!(
@@ -490,7 +413,7 @@ pub struct MotionGenerator {
 
 impl MotionGenerator {
     /// A generator of valid `params`.
-    pub fn new(seed: u64, params: MotionParams) -> Result<Self, MotionParamsError> {
+    pub fn new(seed: u64, params: MotionParams) -> Result<Self, RangeError> {
         params.validate()?;
         Ok(Self {
             rng: ChaCha8Rng::seed_from_u64(seed),
@@ -747,11 +670,7 @@ impl MotionSample {
 }
 
 /// `count` samples of `params` from `seed`, named `motion-s<seed>-<i:05>`.
-pub fn generate(
-    params: &MotionParams,
-    count: usize,
-    seed: u64,
-) -> Result<Vec<Sample>, MotionParamsError> {
+pub fn generate(params: &MotionParams, count: usize, seed: u64) -> Result<Vec<Sample>, RangeError> {
     let mut generator = MotionGenerator::new(seed, *params)?;
     Ok((0..count)
         .map(|i| generator.sample(&format!("motion-s{seed}-{i:05}")).sample)
@@ -775,17 +694,12 @@ impl MotionSpec {
 
     /// Checks the count and the params; errors name the spec key (`frames=1: ...`).
     pub fn validate(&self) -> Result<(), SpecError> {
-        if self.count == 0 || self.count > Self::MAX_COUNT {
-            return Err(SpecError::Count {
-                count: self.count,
-                max: Self::MAX_COUNT,
-            });
-        }
-        self.params.validate().map_err(SpecError::Motion)
+        check_count(self.count, Self::MAX_COUNT)?;
+        self.params.validate().map_err(SpecError::Setting)
     }
 
     /// The samples in the on-disk format, in generation order, named `motion-s<seed>-<i:05>`.
-    pub fn files(&self) -> Result<impl Iterator<Item = SequenceFile> + '_, MotionParamsError> {
+    pub fn files(&self) -> Result<impl Iterator<Item = SequenceFile> + '_, RangeError> {
         let mut generator = MotionGenerator::new(self.seed, self.params)?;
         Ok((0..self.count).map(move |i| {
             generator
@@ -796,17 +710,11 @@ impl MotionSpec {
 
     /// The samples as validated sequences: what loading the files of [`Self::files`] gives.
     pub fn sequences(&self) -> Result<Vec<Sequence>, DataError> {
-        let invalid = |e: MotionParamsError| DataError::Invalid {
+        let invalid = |e: RangeError| DataError::Invalid {
             path: self.to_string().into(),
             reason: e.for_spec(),
         };
-        self.files()
-            .map_err(invalid)?
-            .map(|file| {
-                let name = std::path::PathBuf::from(&file.name);
-                Sequence::from_file(file, &name)
-            })
-            .collect()
+        load_files(self.files().map_err(invalid)?)
     }
 }
 
@@ -832,15 +740,6 @@ impl std::fmt::Display for MotionSpec {
     }
 }
 
-/// `A` or `A-B` as a range.
-pub(super) fn parse_pair<T: std::str::FromStr + Copy>(text: &str) -> Result<[T; 2], SpecError>
-where
-    T::Err: std::fmt::Display,
-{
-    let (a, b) = parse_range::<T>(text)?;
-    Ok([a, b.unwrap_or(a)])
-}
-
 impl std::str::FromStr for MotionSpec {
     type Err = SpecError;
 
@@ -853,31 +752,24 @@ impl std::str::FromStr for MotionSpec {
             params: MotionParams::default(),
         };
         for part in text.split(',').filter(|p| !p.is_empty()) {
-            let (key, value) = part.split_once('=').ok_or_else(|| SpecError::NotKeyValue {
-                part: part.to_string(),
-            })?;
-            let bad = |e: &dyn std::fmt::Display| SpecError::Value {
-                key: key.to_string(),
-                value: value.to_string(),
-                reason: e.to_string(),
-            };
+            let setting = Setting::parse(part)?;
             let p = &mut spec.params;
-            match key {
-                "count" => spec.count = value.parse().map_err(|e| bad(&e))?,
-                "seed" => spec.seed = value.parse().map_err(|e| bad(&e))?,
-                "frames" => p.frames = parse_pair(value).map_err(|e| bad(&e))?,
-                "motions" => p.motions = parse_pair(value).map_err(|e| bad(&e))?,
-                "points" => p.points = parse_pair(value).map_err(|e| bad(&e))?,
-                "noise" => p.noise = parse_pair(value).map_err(|e| bad(&e))?,
-                "outliers" => p.outliers = parse_pair(value).map_err(|e| bad(&e))?,
-                "motion-scale" => p.motion_scale = parse_pair(value).map_err(|e| bad(&e))?,
-                "focal" => p.focal = parse_pair(value).map_err(|e| bad(&e))?,
-                "width" => p.width = parse_pair(value).map_err(|e| bad(&e))?,
-                "height" => p.height = parse_pair(value).map_err(|e| bad(&e))?,
+            match setting.key {
+                "count" => spec.count = setting.value()?,
+                "seed" => spec.seed = setting.value()?,
+                "frames" => p.frames = setting.pair()?,
+                "motions" => p.motions = setting.pair()?,
+                "points" => p.points = setting.pair()?,
+                "noise" => p.noise = setting.pair()?,
+                "outliers" => p.outliers = setting.pair()?,
+                "motion-scale" => p.motion_scale = setting.pair()?,
+                "focal" => p.focal = setting.pair()?,
+                "width" => p.width = setting.pair()?,
+                "height" => p.height = setting.pair()?,
                 _ => {
                     return Err(SpecError::UnknownSetting {
                         generator: "motion",
-                        key: key.to_string(),
+                        key: setting.key.to_string(),
                         known: "count, seed, frames, motions, points, noise, outliers, motion-scale, focal, width, height",
                     });
                 }
@@ -1288,7 +1180,7 @@ mod tests {
         assert_eq!(err.for_spec(), "frames=1: frames must lie in [2, 100]");
         assert!(matches!(
             params(|p| p.frames = [5, 2]).validate(),
-            Err(MotionParamsError::Inverted {
+            Err(RangeError::Inverted {
                 flag: "--frames",
                 ..
             })

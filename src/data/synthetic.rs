@@ -42,7 +42,9 @@ use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use super::dataset::{DataError, Sample, Sequence, SequenceFile, SpecError};
+use super::dataset::{
+    DataError, Sample, Sequence, SequenceFile, Setting, SpecError, check_count, load_files,
+};
 use super::points::{Kind, PointSet};
 
 /// How many structures a sample of the `random` variant has.
@@ -524,12 +526,7 @@ impl LceSpec {
     /// Checks what a generator needs: a valid config and 1 to [`Self::MAX_COUNT`] samples.
     /// Errors name the spec's key (`points=1: ...`).
     pub fn validate(&self) -> Result<(), SpecError> {
-        if self.count == 0 || self.count > Self::MAX_COUNT {
-            return Err(SpecError::Count {
-                count: self.count,
-                max: Self::MAX_COUNT,
-            });
-        }
+        check_count(self.count, Self::MAX_COUNT)?;
         self.config.validate().map_err(SpecError::Lce)
     }
 
@@ -551,12 +548,7 @@ impl LceSpec {
     /// same settings gives (checked by a test), without the disk. Fails only where a file would
     /// not load either (a scale so large that points overflow).
     pub fn sequences(&self) -> Result<Vec<Sequence>, DataError> {
-        self.files()
-            .map(|file| {
-                let name = std::path::PathBuf::from(&file.name);
-                Sequence::from_file(file, &name)
-            })
-            .collect()
+        load_files(self.files())
     }
 }
 
@@ -619,33 +611,26 @@ impl std::str::FromStr for LceSpec {
             config: LceConfig::default(),
         };
         for part in parts {
-            let (key, value) = part.split_once('=').ok_or_else(|| SpecError::NotKeyValue {
-                part: part.to_string(),
-            })?;
-            let bad = |e: &dyn std::fmt::Display| SpecError::Value {
-                key: key.to_string(),
-                value: value.to_string(),
-                reason: e.to_string(),
-            };
+            let setting = Setting::parse(part)?;
             let c = &mut spec.config;
-            match key {
-                "count" => spec.count = value.parse().map_err(|e| bad(&e))?,
-                "seed" => spec.seed = value.parse().map_err(|e| bad(&e))?,
-                "scale" => c.scale = value.parse().map_err(|e| bad(&e))?,
-                "noise" => c.noise = value.parse().map_err(|e| bad(&e))?,
+            match setting.key {
+                "count" => spec.count = setting.value()?,
+                "seed" => spec.seed = setting.value()?,
+                "scale" => c.scale = setting.value()?,
+                "noise" => c.noise = setting.value()?,
                 "points" => {
-                    (c.points_per_shape, c.points_max) = parse_range(value).map_err(|e| bad(&e))?;
+                    (c.points_per_shape, c.points_max) = setting.range()?;
                 }
                 "arc" => {
-                    let (a, b) = parse_range::<f64>(value).map_err(|e| bad(&e))?;
+                    let (a, b) = setting.range::<f64>()?;
                     c.arc = Some([a, b.unwrap_or(a)]);
                 }
-                "outliers" => c.outliers = value.parse().map_err(|e| bad(&e))?,
-                "similarity" => c.similarity = value.parse().map_err(|e| bad(&e))?,
+                "outliers" => c.outliers = setting.value()?,
+                "similarity" => c.similarity = setting.value()?,
                 _ => {
                     return Err(SpecError::UnknownSetting {
                         generator: "LCE",
-                        key: key.to_string(),
+                        key: setting.key.to_string(),
                         known: "count, seed, scale, noise, points, arc, outliers, similarity",
                     });
                 }

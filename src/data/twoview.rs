@@ -78,11 +78,12 @@ use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal, UnitSphere};
 
-use super::dataset::{DataError, Sample, Sequence, SequenceFile, SpecError};
-use super::motion::{
-    V3, add, log_uniform, parse_pair, random_rotation, range_text, scale, sub, uniform,
+use super::dataset::{
+    DataError, Sample, Sequence, SequenceFile, Setting, SpecError, check_count, load_files,
 };
+use super::motion::{V3, add, log_uniform, random_rotation, scale, sub, uniform};
 use super::points::{ImageSize, Kind, PointSet};
+use super::ranges::{RangeError, check_range, range_text};
 use crate::geometry::linalg::{
     Mat3, mat3_inverse, mat3_mul, mat3_transpose, mat3_vec, rodrigues, unit_norm_sign,
 };
@@ -154,76 +155,6 @@ impl TwoViewMode {
     }
 }
 
-/// A generator setting that cannot be drawn from: the flag that sets it, its value and why.
-/// Its spec key (`twoview:homography,groups=...`) is the flag without the dashes ([`Self::key`]).
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-pub enum TwoViewParamsError {
-    /// A value outside what the generator accepts.
-    #[error("{flag} {value}: {reason}")]
-    OutOfRange {
-        flag: &'static str,
-        value: String,
-        reason: String,
-    },
-    /// A range whose smallest value exceeds its largest.
-    #[error("{flag} {value}: the smallest value ({min}) exceeds the largest ({max})")]
-    Inverted {
-        flag: &'static str,
-        value: String,
-        min: String,
-        max: String,
-    },
-}
-
-impl TwoViewParamsError {
-    /// The command-line flag of the setting (`--groups`).
-    pub fn flag(&self) -> &'static str {
-        match self {
-            Self::OutOfRange { flag, .. } | Self::Inverted { flag, .. } => flag,
-        }
-    }
-
-    /// Its key in a `twoview:` spec (`groups`).
-    pub fn key(&self) -> &'static str {
-        &self.flag()[2..]
-    }
-
-    /// The message naming the spec key instead of the flag (`groups=0: ...`).
-    pub fn for_spec(&self) -> String {
-        let text = self.to_string();
-        format!("{}={}", self.key(), &text[self.flag().len() + 1..])
-    }
-}
-
-/// Checks that `[lo, hi]` is ordered and inside `[min, max]` (an open upper end when
-/// `open_max`).
-fn check_range<T: PartialOrd + Copy + std::fmt::Display>(
-    flag: &'static str,
-    range: [T; 2],
-    allowed: (T, T, bool),
-    what: &str,
-) -> Result<(), TwoViewParamsError> {
-    let (min, max, open_max) = allowed;
-    let inside = |v: T| v >= min && if open_max { v < max } else { v <= max };
-    if !(inside(range[0]) && inside(range[1])) {
-        let close = if open_max { ")" } else { "]" };
-        return Err(TwoViewParamsError::OutOfRange {
-            flag,
-            value: range_text(range),
-            reason: format!("{what} must lie in [{min}, {max}{close}"),
-        });
-    }
-    if range[0] > range[1] {
-        return Err(TwoViewParamsError::Inverted {
-            flag,
-            value: range_text(range),
-            min: range[0].to_string(),
-            max: range[1].to_string(),
-        });
-    }
-    Ok(())
-}
-
 /// Generator settings: the mode, then inclusive ranges `[min, max]` a sample draws its values
 /// from (see the module docs for the distributions and [`TwoViewParams::validate`] for the
 /// limits).
@@ -279,7 +210,7 @@ impl TwoViewParams {
     }
 
     /// Checks the settings a generator can draw from; the error names the flag.
-    pub fn validate(&self) -> Result<(), TwoViewParamsError> {
+    pub fn validate(&self) -> Result<(), RangeError> {
         check_range(
             "--groups",
             self.groups,
@@ -309,7 +240,7 @@ impl TwoViewParams {
         check_range("--height", self.height, (64.0, 1e5, false), "height (px)")?;
         let side = self.width[0].min(self.height[0]).round();
         if self.noise[1] * Self::NOISE_TO_IMAGE > side {
-            return Err(TwoViewParamsError::OutOfRange {
+            return Err(RangeError::OutOfRange {
                 flag: "--noise",
                 value: range_text(self.noise),
                 reason: format!(
@@ -322,7 +253,7 @@ impl TwoViewParams {
         let inliers = (self.groups[1] * self.points[1]) as f64;
         let rows = inliers + (self.outliers[1] / (1.0 - self.outliers[1]) * inliers).round();
         if rows > Self::MAX_ROWS as f64 {
-            return Err(TwoViewParamsError::OutOfRange {
+            return Err(RangeError::OutOfRange {
                 flag: "--outliers",
                 value: range_text(self.outliers),
                 reason: format!(
@@ -472,7 +403,7 @@ pub struct TwoViewGenerator {
 
 impl TwoViewGenerator {
     /// A generator of valid `params`.
-    pub fn new(seed: u64, params: TwoViewParams) -> Result<Self, TwoViewParamsError> {
+    pub fn new(seed: u64, params: TwoViewParams) -> Result<Self, RangeError> {
         params.validate()?;
         Ok(Self {
             rng: ChaCha8Rng::seed_from_u64(seed),
@@ -787,7 +718,7 @@ pub fn generate(
     params: &TwoViewParams,
     count: usize,
     seed: u64,
-) -> Result<Vec<Sample>, TwoViewParamsError> {
+) -> Result<Vec<Sample>, RangeError> {
     let mut generator = TwoViewGenerator::new(seed, *params)?;
     let mode = params.mode.as_str();
     Ok((0..count)
@@ -815,18 +746,13 @@ impl TwoViewSpec {
 
     /// Checks the count and the params; errors name the spec key (`groups=0: ...`).
     pub fn validate(&self) -> Result<(), SpecError> {
-        if self.count == 0 || self.count > Self::MAX_COUNT {
-            return Err(SpecError::Count {
-                count: self.count,
-                max: Self::MAX_COUNT,
-            });
-        }
-        self.params.validate().map_err(SpecError::TwoView)
+        check_count(self.count, Self::MAX_COUNT)?;
+        self.params.validate().map_err(SpecError::Setting)
     }
 
     /// The samples in the on-disk format, in generation order, named
     /// `twoview-<mode>-s<seed>-<i:05>`.
-    pub fn files(&self) -> Result<impl Iterator<Item = SequenceFile> + '_, TwoViewParamsError> {
+    pub fn files(&self) -> Result<impl Iterator<Item = SequenceFile> + '_, RangeError> {
         let mut generator = TwoViewGenerator::new(self.seed, self.params)?;
         let mode = self.params.mode.as_str();
         Ok((0..self.count).map(move |i| {
@@ -838,17 +764,11 @@ impl TwoViewSpec {
 
     /// The samples as validated sequences: what loading the files of [`Self::files`] gives.
     pub fn sequences(&self) -> Result<Vec<Sequence>, DataError> {
-        let invalid = |e: TwoViewParamsError| DataError::Invalid {
+        let invalid = |e: RangeError| DataError::Invalid {
             path: self.to_string().into(),
             reason: e.for_spec(),
         };
-        self.files()
-            .map_err(invalid)?
-            .map(|file| {
-                let name = std::path::PathBuf::from(&file.name);
-                Sequence::from_file(file, &name)
-            })
-            .collect()
+        load_files(self.files().map_err(invalid)?)
     }
 }
 
@@ -890,29 +810,22 @@ impl std::str::FromStr for TwoViewSpec {
             params: TwoViewParams::new(mode),
         };
         for part in parts {
-            let (key, value) = part.split_once('=').ok_or_else(|| SpecError::NotKeyValue {
-                part: part.to_string(),
-            })?;
-            let bad = |e: &dyn std::fmt::Display| SpecError::Value {
-                key: key.to_string(),
-                value: value.to_string(),
-                reason: e.to_string(),
-            };
+            let setting = Setting::parse(part)?;
             let p = &mut spec.params;
-            match key {
-                "count" => spec.count = value.parse().map_err(|e| bad(&e))?,
-                "seed" => spec.seed = value.parse().map_err(|e| bad(&e))?,
-                "groups" => p.groups = parse_pair(value).map_err(|e| bad(&e))?,
-                "points" => p.points = parse_pair(value).map_err(|e| bad(&e))?,
-                "noise" => p.noise = parse_pair(value).map_err(|e| bad(&e))?,
-                "outliers" => p.outliers = parse_pair(value).map_err(|e| bad(&e))?,
-                "focal" => p.focal = parse_pair(value).map_err(|e| bad(&e))?,
-                "width" => p.width = parse_pair(value).map_err(|e| bad(&e))?,
-                "height" => p.height = parse_pair(value).map_err(|e| bad(&e))?,
+            match setting.key {
+                "count" => spec.count = setting.value()?,
+                "seed" => spec.seed = setting.value()?,
+                "groups" => p.groups = setting.pair()?,
+                "points" => p.points = setting.pair()?,
+                "noise" => p.noise = setting.pair()?,
+                "outliers" => p.outliers = setting.pair()?,
+                "focal" => p.focal = setting.pair()?,
+                "width" => p.width = setting.pair()?,
+                "height" => p.height = setting.pair()?,
                 _ => {
                     return Err(SpecError::UnknownSetting {
                         generator: "two-view",
-                        key: key.to_string(),
+                        key: setting.key.to_string(),
                         known: "count, seed, groups, points, noise, outliers, focal, width, height",
                     });
                 }

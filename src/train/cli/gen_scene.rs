@@ -152,11 +152,7 @@ impl GenMotionJob {
     pub fn run(&self) -> Result<String, CliError> {
         let spec = self.spec()?;
         write(spec.files()?, &self.out)?;
-        Ok(format!(
-            "wrote {} motion samples to {} ({spec})",
-            spec.count,
-            self.out.display()
-        ))
+        Ok(written(spec.count, "motion", &self.out, &spec))
     }
 }
 
@@ -186,12 +182,13 @@ impl GenTwoViewJob {
     pub fn run(&self) -> Result<String, CliError> {
         let spec = self.spec()?;
         write(spec.files()?, &self.out)?;
-        Ok(format!(
-            "wrote {} two-view samples to {} ({spec})",
-            spec.count,
-            self.out.display()
-        ))
+        Ok(written(spec.count, "two-view", &self.out, &spec))
     }
+}
+
+/// What a generator command prints.
+fn written(count: usize, what: &str, out: &Path, spec: &dyn std::fmt::Display) -> String {
+    format!("wrote {count} {what} samples to {} ({spec})", out.display())
 }
 
 fn write(files: impl Iterator<Item = SequenceFile>, out: &Path) -> Result<(), CliError> {

@@ -59,9 +59,7 @@ pub enum CliError {
     #[error(transparent)]
     Robustness(#[from] RobustnessError),
     #[error(transparent)]
-    Motion(#[from] crate::data::motion::MotionParamsError),
-    #[error(transparent)]
-    TwoView(#[from] crate::data::twoview::TwoViewParamsError),
+    Setting(#[from] crate::data::ranges::RangeError),
     #[error(transparent)]
     Io(#[from] std::io::Error),
     #[error(transparent)]
