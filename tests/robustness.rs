@@ -236,7 +236,7 @@ fn correspondence_cells_and_fold_models() {
     args.extend(TINY);
     ok(&args);
     let folds_out = temp("ad-folds-out");
-    ok(&[
+    let with_folds = [
         "robustness",
         "--model",
         s(&model),
@@ -248,7 +248,8 @@ fn correspondence_cells_and_fold_models() {
         s(&data),
         "--cells",
         "as-is",
-    ]);
+    ];
+    ok(&with_folds);
     let f = report(&folds_out);
     assert_eq!(f["folds"], s(&cv));
     assert!(
@@ -265,19 +266,7 @@ fn correspondence_cells_and_fold_models() {
     );
     // A missing fold model is named.
     std::fs::remove_dir_all(cv.join("models").join("physics")).unwrap();
-    let err = refused(&[
-        "robustness",
-        "--model",
-        s(&model),
-        "--folds",
-        s(&cv),
-        "--out",
-        s(&folds_out),
-        "--data",
-        s(&data),
-        "--cells",
-        "as-is",
-    ]);
+    let err = refused(&with_folds);
     assert!(err.contains("physics"), "{err}");
 }
 

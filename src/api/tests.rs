@@ -21,9 +21,7 @@ use super::error::ErrorCode;
 use super::routes::{AppState, router};
 use super::types::Limits;
 use crate::data::Kind;
-use crate::loss::Loss;
-use crate::model::{ModelConfig, cpu_device};
-use crate::registry::{LoadedModel, TrainingInfo, card_for};
+use crate::registry::LoadedModel;
 
 const LIMITS: Limits = Limits {
     max_points: 50,
@@ -35,29 +33,7 @@ const BODY_LIMIT: usize = 4096;
 
 /// A one-block network for `kind` on rows of `input_dim` values, embedding in 3 dimensions.
 fn tiny(name: &str, kind: Kind, input_dim: usize) -> LoadedModel {
-    let config = ModelConfig {
-        input_dim,
-        width: 8,
-        depth: 1,
-        embed_dim: 3,
-        batch_norm: false,
-        cn_epsilon: 1e-3,
-        neighbors: 0,
-        graph_neighbors: 0,
-    };
-    let device = cpu_device();
-    let net = config.init_seeded(&device, 7).unwrap();
-    let training = TrainingInfo {
-        data: String::new(),
-        command: String::new(),
-        epochs: 1,
-        learning_rate: 1e-3,
-        seed: 7,
-        seconds: 0.0,
-        machine: String::new(),
-    };
-    let card = card_for(name, kind, &config, Loss::L2, 4, training);
-    LoadedModel::from_parts(card, net, device).unwrap()
+    crate::registry::tests::tiny_model(name, kind, input_dim, 7)
 }
 
 /// A state serving `tiny` (2-frame tracks) and `tiny2d` (points2d); no correspondences model.

@@ -55,8 +55,17 @@ pub(crate) mod tests {
 
     /// A one-block network on 2-frame tracks (D = 4), embedding in 3 dimensions.
     pub(crate) fn tiny_seeded(symmetries: Vec<Symmetry>, seed: u64) -> LoadedModel {
+        let mut model = tiny_model("tiny", Kind::Trajectories, 4, seed);
+        model.card.test_symmetries = symmetries;
+        model.card.validate().unwrap();
+        model
+    }
+
+    /// A one-block network named `name` for `kind` on rows of `input_dim` values, embedding in
+    /// 3 dimensions, initialised from `seed`.
+    pub(crate) fn tiny_model(name: &str, kind: Kind, input_dim: usize, seed: u64) -> LoadedModel {
         let model = ModelConfig {
-            input_dim: 4,
+            input_dim,
             width: 8,
             depth: 1,
             embed_dim: 3,
@@ -76,9 +85,7 @@ pub(crate) mod tests {
             seconds: 0.0,
             machine: String::new(),
         };
-        let mut card = card_for("tiny", Kind::Trajectories, &model, Loss::L2, 4, info);
-        card.test_symmetries = symmetries;
-        card.validate().unwrap();
+        let card = card_for(name, kind, &model, Loss::L2, 4, info);
         LoadedModel::from_parts(card, net, device).unwrap()
     }
 
