@@ -292,7 +292,10 @@ fn main() {
                     auto_k,
                 ));
             });
-            println!("refine   N={:>5}  {name:<26}, {how}: {ms:>8.2} ms", points.len());
+            println!(
+                "refine   N={:>5}  {name:<26}, {how}: {ms:>8.2} ms",
+                points.len()
+            );
         }
     }
 

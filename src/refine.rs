@@ -465,9 +465,12 @@ mod tests {
         assert_eq!(r.labels, want);
     }
 
+    /// Kind, row width, values, labels, K, family.
+    type Case = (Kind, usize, Vec<f64>, Vec<usize>, usize, Family);
+
     #[test]
     fn degenerate_and_tiny_groups_never_give_nan_or_panic() {
-        let cases: Vec<(Kind, usize, Vec<f64>, Vec<usize>, usize, Family)> = vec![
+        let cases: Vec<Case> = vec![
             // Two points, two groups.
             (
                 Kind::Points2d,

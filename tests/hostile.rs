@@ -915,7 +915,12 @@ fn cases() -> Vec<Case> {
                 s.push_str(if i > 0 { ",[" } else { "[" });
                 for f in 0..100 {
                     let sep = if f > 0 { "," } else { "" };
-                    let _ = write!(s, "{sep}{:.3},{:.3}", 100.5 + f as f64, 200.25 + i as f64 * 0.01);
+                    let _ = write!(
+                        s,
+                        "{sep}{:.3},{:.3}",
+                        100.5 + f as f64,
+                        200.25 + i as f64 * 0.01
+                    );
                 }
                 s.push(']');
             }

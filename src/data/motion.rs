@@ -411,6 +411,10 @@ pub struct MotionGenerator {
     params: MotionParams,
 }
 
+/// One emitted row while a sample is assembled: the track, its raw label, and for inliers the
+/// motion and body point it follows.
+type TrackRow = (Vec<f64>, usize, Option<(usize, V3)>);
+
 impl MotionGenerator {
     /// A generator of valid `params`.
     pub fn new(seed: u64, params: MotionParams) -> Result<Self, RangeError> {
@@ -564,7 +568,7 @@ impl MotionGenerator {
         let phi = setup.outlier_fraction;
         let outliers = (phi / (1.0 - phi) * inliers as f64).round() as usize;
         // Raw labels as in a file: outliers 0, motions 1..=K.
-        let mut rows: Vec<(Vec<f64>, usize, Option<(usize, V3)>)> = tracks
+        let mut rows: Vec<TrackRow> = tracks
             .into_iter()
             .map(|(row, m, body)| (row, m + 1, Some((m, body))))
             .collect();
