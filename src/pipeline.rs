@@ -103,15 +103,17 @@ pub fn check(model: &LoadedModel, points: &PointSet) -> Result<(), FitError> {
     Ok(())
 }
 
-/// Stage 1: the frames the network reads, `[n, 2F]` -> `[n, input_dim]`: the input itself when
-/// it has the model's width, else its tracks resampled to the model's frame count as the card's
-/// `frames` says. Only trajectories have frames; other kinds pass unchanged.
-pub fn frames_read(model: &LoadedModel, points: &PointSet) -> PointSet {
+/// Stage 1: the frames the network reads, `[n, 2F]` -> one `[n, input_dim]` set per window:
+/// the input itself when it has the model's width, else its tracks resampled to the model's
+/// frame count as the card's `frames` says (one window, or several for
+/// [`frames::FrameSampling::Windows`]). Only trajectories have frames; other kinds pass
+/// unchanged.
+pub fn frames_read(model: &LoadedModel, points: &PointSet) -> Vec<PointSet> {
     let card = &model.card;
     if card.kind != Kind::Trajectories || points.dim() == card.input_dim {
-        return points.clone();
+        return vec![points.clone()];
     }
-    frames::resample(points, card.input_dim / 2, card.frames)
+    frames::resample_windows(points, card.input_dim / 2, card.frames)
 }
 
 /// Stages 1 and 2, the one place the network input is built, for training and serving alike:
@@ -126,8 +128,9 @@ pub fn network_input(
     with_neighbors(&normalization.apply(points, image), points.dim(), neighbors)
 }
 
-/// Stages 1 and 2 for one model: checked, read at the model's frames, normalised and with
-/// neighbour offsets: `points` `[n, d]` -> `[n, feature_dim]`.
+/// Stages 1 and 2 for one model: checked, read at the model's frames (the first window when
+/// the card reads several), normalised and with neighbour offsets: `points` `[n, d]` ->
+/// `[n, feature_dim]`.
 pub fn prepare(
     model: &LoadedModel,
     points: &PointSet,
@@ -137,7 +140,7 @@ pub fn prepare(
     let card = &model.card;
     Ok(network_input(
         card.normalization,
-        &frames_read(model, points),
+        &frames_read(model, points).swap_remove(0),
         image,
         card.architecture.neighbors,
     ))
@@ -188,12 +191,13 @@ impl Embedding {
 }
 
 /// Stage 3: the embeddings a fit clusters: `points` `[n, d]` -> `[m, e * c]` over the m rows
-/// read (a set denser than the model's training sets is thinned, with `seed`), where c counts the networks (the card's and its members)
+/// read (a set denser than the model's training sets is thinned, with `seed`), where c counts
+/// the frame windows read ([`frames_read`]) times the networks (the card's and its members)
 /// times the images (the input and its images under every combination of `symmetries`). Row i
-/// holds the embeddings of point i by each network of each image (networks vary fastest), side
-/// by side, divided by the square root of c so that it keeps unit length. An image that does
-/// not exist (a symmetry that does not apply to the kind, or coordinates pushed past the
-/// accepted range) is left out.
+/// holds the embeddings of point i by each network of each image of each window (networks vary
+/// fastest, windows slowest), side by side, divided by the square root of c so that it keeps
+/// unit length. An image that does not exist (a symmetry that does not apply to the kind, or
+/// coordinates pushed past the accepted range) is left out.
 pub fn embed(
     model: &LoadedModel,
     points: &PointSet,
@@ -202,9 +206,14 @@ pub fn embed(
     seed: u64,
 ) -> Result<Embedding, FitError> {
     check(model, points)?;
-    let read = frames_read(model, points);
-    let (rows, owner) = rows_read(model, &read, image, seed).unzip();
-    let (values, width) = embed_rows(model, &read, rows.as_deref(), image, symmetries)?;
+    let windows = frames_read(model, points);
+    let (rows, owner) = rows_read(model, &windows[0], image, seed).unzip();
+    let mut blocks = Vec::with_capacity(windows.len());
+    for read in &windows {
+        blocks.push(embed_rows(model, read, rows.as_deref(), image, symmetries)?);
+    }
+    let (block_width, width) = (blocks[0].1, blocks[0].1 * blocks.len());
+    let values = side_by_side(blocks.into_iter().map(|(v, _)| v).collect(), block_width);
     Ok(Embedding {
         values,
         width,
@@ -212,8 +221,8 @@ pub fn embed(
     })
 }
 
-/// [`embed`] of the given rows (`None`: all) of `read`, the set at the model's frames:
-/// -> (`[m, width]`, width).
+/// [`embed`] of the given rows (`None`: all) of `read`, one window at the model's frames:
+/// -> (`[m, width]`, width), rows of unit length.
 fn embed_rows(
     model: &LoadedModel,
     read: &PointSet,
@@ -238,15 +247,27 @@ fn embed_rows(
     for p in &images {
         all.extend(model.embed_all(&prepare(model, p, image)?));
     }
-    if all.len() == 1 {
-        return Ok((all.remove(0), e));
+    let width = e * all.len();
+    debug_assert!(all.iter().all(|z| z.len() == m * e));
+    Ok((side_by_side(all, e), width))
+}
+
+/// c blocks of unit rows, each `[m, width]` -> `[m, c * width]`: row i holds row i of every
+/// block in order, divided by the square root of c so that it keeps unit length.
+fn side_by_side(mut blocks: Vec<Vec<f32>>, width: usize) -> Vec<f32> {
+    if blocks.len() == 1 {
+        return blocks.remove(0);
     }
-    let scale = 1.0 / (all.len() as f32).sqrt();
-    let rows = (0..m)
-        .flat_map(|i| all.iter().flat_map(move |z| &z[i * e..(i + 1) * e]))
+    let m = blocks[0].len() / width;
+    let scale = 1.0 / (blocks.len() as f32).sqrt();
+    (0..m)
+        .flat_map(|i| {
+            blocks
+                .iter()
+                .flat_map(move |z| &z[i * width..(i + 1) * width])
+        })
         .map(|v| v * scale)
-        .collect();
-    Ok((rows, e * all.len()))
+        .collect()
 }
 
 /// Stage 4: clusters embeddings from [`embed`] on the model's threads: `[m, width]` -> K, the
@@ -497,6 +518,42 @@ pub(crate) mod tests {
             model.fit(&flat, None, &params),
             Err(FitError::WrongKind { .. })
         ));
+    }
+
+    #[test]
+    fn windows_set_the_embeddings_of_every_frame_window_side_by_side() {
+        let mut model = tiny(vec![]);
+        model.card.frames = frames::FrameSampling::Windows;
+        let (points, image, params) = ten_tracks(7, 13);
+        // Three frames read by a 2-frame model: windows over frames 0-1 and 1-2.
+        let values = (0..points.len())
+            .flat_map(|i| {
+                let r = points.row(i);
+                [r[0], r[1], r[2], r[3], r[2] + 1.0, r[3] - 2.0]
+            })
+            .collect();
+        let longer = PointSet::from_flat(Kind::Trajectories, 6, values).unwrap();
+        let fit = model.fit(&longer, image, &params).unwrap();
+        assert_eq!(fit.embed_dim, 6);
+        let window = |cols: [usize; 4]| {
+            let values = (0..longer.len())
+                .flat_map(|i| cols.map(|c| longer.row(i)[c]))
+                .collect();
+            let p = PointSet::from_flat(Kind::Trajectories, 4, values).unwrap();
+            model.fit(&p, image, &params).unwrap().embeddings
+        };
+        let (a, b) = (window([0, 1, 2, 3]), window([2, 3, 4, 5]));
+        let scale = 1.0 / 2f32.sqrt();
+        for i in 0..longer.len() {
+            let row = &fit.embeddings[i * 6..(i + 1) * 6];
+            for j in 0..3 {
+                assert!((row[j] - a[i * 3 + j] * scale).abs() < 1e-6, "row {i}");
+                assert!((row[3 + j] - b[i * 3 + j] * scale).abs() < 1e-6, "row {i}");
+            }
+        }
+        // The model's own frame count is one window, the input itself.
+        let own = model.fit(&points, image, &params).unwrap();
+        assert_eq!(own.embed_dim, 3);
     }
 
     #[test]

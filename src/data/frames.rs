@@ -8,6 +8,11 @@
 //!   hand-held camera's motion over 5 consecutive frames is too small to separate motions;
 //! - [`FrameSampling::First`]: t_i = i, the first F_m frames, as the model was trained (when
 //!   F ≥ F_m).
+//! - [`FrameSampling::Windows`]: W = min(⌈F / F_m⌉, [`MAX_WINDOWS`]) windows of F_m consecutive
+//!   frames, window w starting at s_w = round(w (F − F_m) / (W − 1)) (the first window at frame 0,
+//!   the last ending at the last frame), t_i = s_w + i. The network reads every window and the
+//!   fit sets their embeddings side by side, so motion anywhere along a long track is seen at
+//!   the frame rate the model was trained on. F ≤ F_m gives the one window `First` reads.
 //!
 //! A position at a fractional time is interpolated linearly between its two frames; a track of
 //! fewer than F_m frames is thus read at interpolated times between its real ones. Every track must
@@ -27,7 +32,12 @@ pub enum FrameSampling {
     Spread,
     /// The first F_m frames (interpolated when the track is shorter).
     First,
+    /// Windows of F_m consecutive frames spread over the track, each read by the network.
+    Windows,
 }
+
+/// The most windows [`FrameSampling::Windows`] reads: each costs one forward pass.
+pub const MAX_WINDOWS: usize = 8;
 
 impl FrameSampling {
     /// Time of each of `target` frames on an axis of `frames` frames (both ≥ 2 for `Spread`).
@@ -40,8 +50,27 @@ impl FrameSampling {
             FrameSampling::Spread => vec![0.0],
             FrameSampling::First if frames >= target => (0..target).map(|i| i as f64).collect(),
             // Fewer frames than the model reads: spread them, as nothing else is there.
-            FrameSampling::First => FrameSampling::Spread.times(frames, target),
+            FrameSampling::First | FrameSampling::Windows => {
+                FrameSampling::Spread.times(frames, target)
+            }
         }
+    }
+
+    /// The times of each window the network reads, `target` each, on an axis of `frames`
+    /// frames: one window for `Spread` and `First` ([`Self::times`]), up to [`MAX_WINDOWS`]
+    /// for `Windows`.
+    pub fn windows(self, frames: usize, target: usize) -> Vec<Vec<f64>> {
+        if self != FrameSampling::Windows || frames <= target {
+            return vec![self.times(frames, target)];
+        }
+        let count = frames.div_ceil(target).min(MAX_WINDOWS);
+        let span = (frames - target) as f64;
+        (0..count)
+            .map(|w| {
+                let start = (w as f64 * span / (count - 1) as f64).round();
+                (0..target).map(|i| start + i as f64).collect()
+            })
+            .collect()
     }
 }
 
@@ -49,12 +78,29 @@ impl FrameSampling {
 /// must be even (every trajectory [`PointSet`] is). The result is a trajectory set of the same
 /// kind and order.
 pub fn resample(points: &PointSet, target: usize, sampling: FrameSampling) -> PointSet {
+    read_at(points, &sampling.times(points.dim() / 2, target))
+}
+
+/// Tracks `[n, 2F]` -> one `[n, 2 target]` set per window `sampling` reads
+/// ([`FrameSampling::windows`]), in window order.
+pub fn resample_windows(
+    points: &PointSet,
+    target: usize,
+    sampling: FrameSampling,
+) -> Vec<PointSet> {
     let frames = points.dim() / 2;
-    let times = sampling.times(frames, target);
+    let windows = sampling.windows(frames, target);
+    windows.iter().map(|t| read_at(points, t)).collect()
+}
+
+/// Tracks `[n, 2F]` -> `[n, 2 times.len()]`, each read at the given (fractional) frame times.
+fn read_at(points: &PointSet, times: &[f64]) -> PointSet {
+    let frames = points.dim() / 2;
+    let target = times.len();
     let mut values = Vec::with_capacity(points.len() * 2 * target);
     for i in 0..points.len() {
         let row = points.row(i);
-        for &t in &times {
+        for &t in times {
             let lo = (t.floor() as usize).min(frames - 1);
             let hi = (lo + 1).min(frames - 1);
             let w = t - lo as f64;
@@ -112,7 +158,50 @@ mod tests {
     #[test]
     fn the_model_width_reads_every_frame_unchanged() {
         let t = tracks(3, 5);
-        assert_eq!(resample(&t, 5, FrameSampling::Spread), t);
-        assert_eq!(resample(&t, 5, FrameSampling::First), t);
+        for sampling in [FrameSampling::Spread, FrameSampling::First] {
+            assert_eq!(resample(&t, 5, sampling), t);
+        }
+        assert_eq!(resample_windows(&t, 5, FrameSampling::Windows), vec![t]);
+    }
+
+    #[test]
+    fn windows_cover_the_track_from_first_to_last_frame() {
+        let starts = |frames| -> Vec<f64> {
+            let w = FrameSampling::Windows.windows(frames, 5);
+            for times in &w {
+                assert_eq!(times.len(), 5);
+                let step = if frames >= 5 {
+                    1.0
+                } else {
+                    (frames - 1) as f64 / 4.0
+                };
+                assert!(times.windows(2).all(|p| p[1] - p[0] == step), "consecutive");
+            }
+            w.iter().map(|t| t[0]).collect()
+        };
+        assert_eq!(starts(8), vec![0., 3.]);
+        assert_eq!(starts(10), vec![0., 5.]);
+        assert_eq!(starts(15), vec![0., 5., 10.]);
+        assert_eq!(starts(16), vec![0., 4., 7., 11.]);
+        // A long track: MAX_WINDOWS windows, the last ending at the last frame.
+        let long = starts(100);
+        assert_eq!(long.len(), MAX_WINDOWS);
+        assert_eq!((long[0], long[MAX_WINDOWS - 1]), (0., 95.));
+        // Short tracks: the one window First reads, interpolated.
+        assert_eq!(starts(3), vec![0.]);
+        let p = resample_windows(&tracks(2, 12), 5, FrameSampling::Windows);
+        assert_eq!(p.len(), 3);
+        assert_eq!(
+            p[2].row(0),
+            &[7., -7., 8., -8., 9., -9., 10., -10., 11., -11.]
+        );
+        // Spread and First read one window, as resample does.
+        for sampling in [FrameSampling::Spread, FrameSampling::First] {
+            let t = tracks(2, 12);
+            assert_eq!(
+                resample_windows(&t, 5, sampling),
+                vec![resample(&t, 5, sampling)]
+            );
+        }
     }
 }
