@@ -29,7 +29,10 @@
 //!
 //! **Merging.** When K was chosen automatically, two structures whose union one model of the
 //! same family fits with a noise level within [`MERGE_SIGMAS`] × σ are one structure seen twice
-//! (K chosen too high), and merge. A K the caller gave is kept.
+//! (K chosen too high), and merge. A K the caller gave is kept. Motion subspaces never merge:
+//! an affine subspace of rank up to 4 holds two rigid motions whose frame-to-frame motion is
+//! small (a hand-held camera at 30 fps) within the noise, though each motion's own subspace
+//! still tells its tracks apart.
 //!
 //! Groups whose model is degenerate (too few or collinear points) keep their learned points and
 //! never take others'.
@@ -196,7 +199,7 @@ pub fn refine(
             g.fit = fit;
         }
     }
-    if merge_structures {
+    if merge_structures && family != Family::Subspace {
         merge(points, &mut current, &mut groups, family, sigma);
     }
     // Points of dropped groups that the last round did not move.
@@ -462,6 +465,44 @@ mod tests {
         );
         assert_eq!(r.structures.len(), 2);
         let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
+        assert_eq!(r.labels, want);
+    }
+
+    #[test]
+    fn motion_subspaces_that_one_subspace_holds_are_not_merged() {
+        // Two motions over 4 frames (rows of 8), each a rank-2 affine subspace (directions 0
+        // and 1, directions 0 and 2), both inside one rank-3 affine subspace: one model fits
+        // their union within the noise.
+        let basis = [
+            [1.0, 0.0, 0.9, 0.1, 0.8, 0.2, 0.7, 0.3],
+            [0.0, 1.0, 0.1, 0.9, 0.2, 0.8, 0.3, 0.7],
+            [0.0, 1.0, 0.0, 1.1, 0.1, 1.2, 0.1, 1.3],
+        ];
+        let (mut values, mut labels) = (Vec::new(), Vec::new());
+        for i in 0..120 {
+            let g = i % 2;
+            let (u, v) = ((5 + (i * 37) % 97) as f64, (5 + (i * 53) % 89) as f64);
+            for d in 0..8 {
+                let hash = ((i * 8 + d) as u64)
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407)
+                    >> 33;
+                let e = 0.05 * ((hash % 1000) as f64 / 500.0 - 1.0);
+                values.push(100.0 + u * basis[0][d] + v * basis[1 + g][d] + e);
+            }
+            labels.push(g);
+        }
+        let points = PointSet::from_flat(Kind::Trajectories, 8, values).unwrap();
+        let rows: Vec<&[f64]> = (0..points.len()).map(|i| points.row(i)).collect();
+        let union = geometry::fit(Family::Subspace, &rows);
+        assert!(union.inliers.iter().all(|&v| v), "one subspace holds both");
+        let params = RefineParams {
+            outliers: false,
+            threshold: None,
+        };
+        let r = refine(&points, &labels, 2, Family::Subspace, &params, true);
+        assert_eq!(r.structures.len(), 2);
+        let want: Vec<i64> = labels.iter().map(|&l| l as i64).collect();
         assert_eq!(r.labels, want);
     }
 
