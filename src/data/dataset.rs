@@ -103,6 +103,22 @@ pub struct Sequence {
     pub visible: Option<Vec<Vec<u8>>>,
 }
 
+/// The family of models sequences follow, when their files say and all agree: AdelaideRMF's
+/// (and the two-view generator's) `model_type` `homography` or `fundamental`; `None` otherwise
+/// (the card's kind then decides, [`crate::registry::ModelCard::family`]).
+pub fn family_of(seqs: &[Sequence]) -> Option<crate::geometry::Family> {
+    use crate::geometry::Family;
+    let family = |s: &Sequence| match s.model_type.as_deref() {
+        Some("homography") => Some(Family::Homography),
+        Some("fundamental") => Some(Family::Fundamental),
+        _ => None,
+    };
+    let first = family(seqs.first()?)?;
+    seqs.iter()
+        .all(|s| family(s) == Some(first))
+        .then_some(first)
+}
+
 /// A labelled sample ready for training or evaluation: labels renumbered to `0..k`, outliers
 /// (raw label 0) kept as one more group, as the paper does.
 #[derive(Debug, Clone)]
@@ -476,6 +492,33 @@ mod tests {
             model_type: None,
             visible: Some(vec![vec![1, 1, 1, 1], vec![1, 1, 1, 1], vec![1, 1, 0, 1]]),
         }
+    }
+
+    #[test]
+    fn the_family_comes_from_the_files_model_type_when_all_agree() {
+        use crate::geometry::Family;
+        let pair = |t: Option<&str>| Sequence {
+            name: "p".into(),
+            points: PointSet::from_flat(
+                Kind::Correspondences,
+                4,
+                vec![0.0, 0.0, 1.0, 1.0, 2.0, 2.0, 3.0, 3.0],
+            )
+            .unwrap(),
+            labels: vec![1, 1],
+            image_size: None,
+            model_type: t.map(String::from),
+            visible: None,
+        };
+        let h = || pair(Some("homography"));
+        assert_eq!(family_of(&[h(), h()]), Some(Family::Homography));
+        assert_eq!(
+            family_of(&[pair(Some("fundamental"))]),
+            Some(Family::Fundamental)
+        );
+        assert_eq!(family_of(&[h(), pair(Some("fundamental"))]), None);
+        assert_eq!(family_of(&[h(), pair(None)]), None);
+        assert_eq!(family_of(&[]), None);
     }
 
     #[test]

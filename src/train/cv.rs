@@ -17,6 +17,7 @@ use serde::{Deserialize, Serialize};
 
 use super::eval::{EvalRow, EvalSettings, evaluate_sample};
 use super::{Hooks, TrainConfig, TrainError, checkpoint_err, prepare, train};
+use crate::data::dataset::family_of;
 use crate::data::{Kind, Normalization, Sample, Sequence, Symmetry, with_symmetries};
 use crate::registry::{LoadedModel, TrainingInfo, WEIGHTS_FILE, card_for};
 
@@ -198,6 +199,7 @@ pub fn run_fold(
         info,
     );
     card.test_symmetries = spec.test_symmetries.clone();
+    card.geometry = family_of(seqs);
     // The fold's model is kept, so that it can be evaluated again without retraining.
     let model_dir = spec.out.join("models").join(name);
     let keep = || -> Result<(), TrainError> {

@@ -16,6 +16,7 @@ use super::CliError;
 use super::card::{init_card, trained_card, training_data, validation_metric};
 use super::options::{DataArgs, TrainArgs, check_symmetries};
 use super::provenance::{command_line, machine};
+use crate::data::dataset::family_of;
 use crate::data::{DataSource, Normalization, Sample};
 use crate::registry::{TrainingInfo, WEIGHTS_FILE};
 use crate::train::cv::Protocol;
@@ -221,6 +222,7 @@ pub fn run(job: &TrainJob, stop: &AtomicBool) -> Result<Trained, CliError> {
         &job.train.test_symmetry,
         info,
     );
+    card.geometry = family_of(&seqs);
     if let Some(v) = outcome.best_val_error {
         let metric =
             validation_metric(v, val_set.len(), outcome.best_epoch, &card.training.command);
