@@ -482,13 +482,13 @@ mod tests {
         for i in 0..120 {
             let g = i % 2;
             let (u, v) = ((5 + (i * 37) % 97) as f64, (5 + (i * 53) % 89) as f64);
-            for d in 0..8 {
+            for (d, (b0, bg)) in basis[0].iter().zip(&basis[1 + g]).enumerate() {
                 let hash = ((i * 8 + d) as u64)
                     .wrapping_mul(6_364_136_223_846_793_005)
                     .wrapping_add(1_442_695_040_888_963_407)
                     >> 33;
                 let e = 0.05 * ((hash % 1000) as f64 / 500.0 - 1.0);
-                values.push(100.0 + u * basis[0][d] + v * basis[1 + g][d] + e);
+                values.push(100.0 + u * b0 + v * bg + e);
             }
             labels.push(g);
         }
