@@ -511,6 +511,49 @@ fn cv_resumes_and_summarises_on_adelaide() {
 }
 
 #[test]
+fn cv_trains_every_fold_on_the_extra_data_too() {
+    let pairs = subset("ad-extra", "adelaidermf", &["biscuit", "book", "cube"]);
+    let out = temp("cv-extra");
+    let mut args = vec![
+        "cv",
+        "--data",
+        s(&pairs),
+        "--model-type",
+        "fundamental",
+        "--out",
+        s(&out),
+        "--k-max",
+        "4",
+        "--fold",
+        "book",
+        "--train-also",
+        "twoview:fundamental,count=2,seed=1",
+    ];
+    args.extend(TINY);
+    ok(&args);
+    let card: Value = serde_json::from_slice(
+        &std::fs::read(out.join("models").join("book").join("model.json")).unwrap(),
+    )
+    .unwrap();
+    let data = card["training"]["data"].as_str().unwrap();
+    assert_eq!(data, "fold without book, plus 2 more sequences");
+    assert_eq!(card["geometry"], "fundamental", "the family of the data");
+    // A bad spec names the flag's value before anything trains.
+    let bad = run(&[
+        "cv",
+        "--data",
+        s(&pairs),
+        "--out",
+        s(&temp("cv-extra-bad")),
+        "--train-also",
+        "motion:count=0",
+    ]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && !err.contains("panicked"), "{err}");
+    assert!(err.contains("count"), "{err}");
+}
+
+#[test]
 fn bad_data_stops_before_training_naming_the_file() {
     let dir = temp("bad-json");
     std::fs::write(dir.join("broken.json"), b"{ this is not json").unwrap();

@@ -183,6 +183,10 @@ struct EvalCmd {
     /// index.html.
     #[arg(long)]
     pictures: Option<PathBuf>,
+    /// Refine from each sample's true groups instead of the network's clustering (with
+    /// --refine on): what the geometric stage gives a perfect network.
+    #[arg(long)]
+    refine_from_truth: bool,
 }
 
 /// `cv`: the job's flags, and how to print the summary.
@@ -233,6 +237,7 @@ fn run(command: Command) -> Result<()> {
                 stride: a.stride as usize,
                 frame_sampling: a.frame_sampling,
                 pictures: a.pictures,
+                refine_from_truth: a.refine_from_truth,
             };
             let evaluated = eval::run(&job)?;
             print!("{}", evaluated.output(a.json)?);

@@ -130,6 +130,8 @@ pub struct CvSpec {
     /// Weights every fold starts from (a pretrained model of the same architecture), instead of
     /// a fresh initialisation.
     pub init: Option<PathBuf>,
+    /// Sequences every fold also trains on, never held out.
+    pub extra: Vec<Sequence>,
 }
 
 fn fold_path(out: &Path, name: &str) -> PathBuf {
@@ -167,6 +169,11 @@ pub fn run_fold(
         .filter(|(i, _)| *i != held_out)
         .flat_map(|(_, s)| spec.samples.train_samples(s))
         .chain(spec.samples.held_out_samples(&seqs[held_out]))
+        .chain(
+            spec.extra
+                .iter()
+                .flat_map(|s| spec.samples.train_samples(s)),
+        )
         .collect();
     let prepared = prepare(
         &train_set,
@@ -182,6 +189,9 @@ pub fn run_fold(
         data: match spec.samples.protocol {
             Protocol::AugmentLeaky => format!("fold of {name}, with its clips after the test clip"),
             _ => format!("fold without {name}"),
+        } + &match spec.extra.len() {
+            0 => String::new(),
+            n => format!(", plus {n} more sequences"),
         },
         command: String::new(),
         epochs: spec.train.epochs,

@@ -75,6 +75,10 @@ pub struct EvalSettings {
     pub seed: u64,
     /// Geometric refinement after every clustering, or `None` to score the clustering alone.
     pub refine: Option<RefineParams>,
+    /// Refinement starts from the sample's true groups (its outlier group included) instead of
+    /// the network's clustering: what the geometric stage gives a perfect network, the ceiling
+    /// of refinement and outlier detection. Every row then scores that one answer.
+    pub from_truth: bool,
 }
 
 /// Scores one clustering of the sample's embeddings, K chosen by `selection`.
@@ -100,7 +104,12 @@ fn score(
             outliers: None,
         },
         Some(r) => {
-            let refined = pipeline::refine(model, &sample.points, &clustering, r);
+            let refined = if s.from_truth {
+                let family = model.card.family();
+                crate::refine::refine(&sample.points, &sample.labels, sample.k, family, r, false)
+            } else {
+                pipeline::refine(model, &sample.points, &clustering, r)
+            };
             let (labels, _) = outliers_as_group(&refined.labels, refined.structures.len());
             Score {
                 // The structures found, and the outlier group where the sample has one (its
@@ -283,6 +292,7 @@ mod tests {
             restarts: 2,
             seed: 1,
             refine: Some(RefineParams::default()),
+            from_truth: false,
         };
         let row = evaluate_sample(&model, &with, &s).unwrap();
         let o = row.known.outliers.expect("scored");
@@ -301,6 +311,49 @@ mod tests {
                 .outliers
                 .is_none()
         );
+    }
+
+    /// Refinement from the true groups does not depend on the network: an untrained one scores
+    /// what the geometry alone gives, the same for every selection.
+    #[test]
+    fn refinement_from_truth_scores_the_geometry_alone() {
+        use crate::data::motion::MotionSpec;
+        let spec: MotionSpec = "count=1,seed=3,frames=6,motions=2,points=40,outliers=0.2,noise=0.5"
+            .parse()
+            .unwrap();
+        let sample = spec.sequences().unwrap()[0].sample();
+        let s = EvalSettings {
+            k_max: 4,
+            restarts: 2,
+            seed: 1,
+            refine: Some(RefineParams::default()),
+            from_truth: true,
+        };
+        let rows: Vec<EvalRow> = [1, 2]
+            .map(|seed| {
+                let model = crate::registry::tests::tiny_model(
+                    "t",
+                    crate::data::Kind::Trajectories,
+                    12,
+                    seed,
+                );
+                evaluate_sample(&model, &sample, &s).unwrap()
+            })
+            .into();
+        for r in &rows {
+            assert_eq!(r.known, r.sod);
+            assert_eq!(r.known, r.silhouette);
+        }
+        assert_eq!(rows[0].known, rows[1].known, "no network in it");
+        let o = rows[0].known.outliers.expect("scored");
+        assert!(o.precision > 0.9 && o.recall > 0.5, "{o:?}");
+        let network = EvalSettings {
+            from_truth: false,
+            ..s
+        };
+        let model = crate::registry::tests::tiny_model("t", crate::data::Kind::Trajectories, 12, 1);
+        let row = evaluate_sample(&model, &sample, &network).unwrap();
+        assert!(row.known.error > rows[0].known.error, "{row:?}");
     }
 
     /// Evaluating embeds once and clusters three times; each score must be what a fit with
@@ -332,6 +385,7 @@ mod tests {
             restarts: 2,
             seed: 4,
             refine: None,
+            from_truth: false,
         };
         let row = evaluate_sample(&model, &sample, &s).unwrap();
         let fit = |selection| {

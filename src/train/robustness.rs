@@ -334,6 +334,7 @@ fn eval_settings(card: &crate::registry::ModelCard, k_max: usize, restarts: usiz
             outliers: card.outliers,
             threshold: None,
         }),
+        from_truth: false,
     }
 }
 

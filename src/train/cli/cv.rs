@@ -36,6 +36,11 @@ pub struct CvJob {
     pub init: Option<PathBuf>,
     #[arg(long, default_value_t = 4)]
     pub restarts: usize,
+    /// More training data for every fold, never held out (e.g. `motion:count=300,seed=1`:
+    /// synthetic clips mixed into the fine-tuning so that it keeps what pretraining taught).
+    /// Repeatable; the same forms as --data.
+    #[arg(long)]
+    pub train_also: Vec<crate::data::DataSource>,
 }
 
 /// Every finished fold of a run, in sequence order, and their totals.
@@ -141,9 +146,14 @@ pub fn run(job: &CvJob, stop: &AtomicBool) -> Result<Option<CvSummary>, CliError
         .as_deref()
         .map(|dir| super::card::init_card(dir, &config).map(|(weights, _)| weights))
         .transpose()?;
+    let mut extra = Vec::new();
+    for source in &job.train_also {
+        extra.extend(source.sequences(job.data.model_type.as_deref())?);
+    }
     let spec = CvSpec {
         train: config,
         init,
+        extra,
         samples,
         test_symmetries: job.train.test_symmetry.clone(),
         eval: EvalSettings {
@@ -151,6 +161,7 @@ pub fn run(job: &CvJob, stop: &AtomicBool) -> Result<Option<CvSummary>, CliError
             restarts: job.restarts,
             seed: 0,
             refine: None,
+            from_truth: false,
         },
         out: job.out.clone(),
     };

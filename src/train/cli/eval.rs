@@ -93,6 +93,9 @@ pub struct EvalJob {
     pub frame_sampling: Option<FrameSampling>,
     /// Write the picture of every sample's fit here, worst first (see [`super::pictures`]).
     pub pictures: Option<PathBuf>,
+    /// Refinement starts from each sample's true groups ([`EvalSettings::from_truth`]); needs
+    /// `refine` on.
+    pub refine_from_truth: bool,
 }
 
 /// What [`run`] measured, not yet recorded.
@@ -164,9 +167,13 @@ pub fn run(job: &EvalJob) -> Result<Evaluated, CliError> {
             .refine
             .is_some_and(|r| (r == Switch::On) != model.card.refine)
             || job.frames.is_some()
-            || job.stride != 1)
+            || job.stride != 1
+            || job.refine_from_truth)
     {
         return Err(CliError::RecordOverride);
+    }
+    if job.refine_from_truth && job.refine != Some(Switch::On) {
+        return Err(CliError::TruthWithoutRefine);
     }
     let params = RefineParams {
         outliers: job
@@ -183,6 +190,7 @@ pub fn run(job: &EvalJob) -> Result<Evaluated, CliError> {
             .refine
             .map_or_else(|| model.card.refines(&s.points), |r| r == Switch::On)
             .then_some(params),
+        from_truth: job.refine_from_truth,
     };
     let mut rows = Vec::new();
     for s in &samples {

@@ -111,6 +111,8 @@ pub enum CliError {
         "--record stores a metric of the model as served: drop --refine, --frames and --stride"
     )]
     RecordOverride,
+    #[error("--refine-from-truth scores refinement: add --refine on")]
+    TruthWithoutRefine,
     #[error("no sequence has a test clip of {frames:?} frames at stride {stride}")]
     NoTestClip { frames: FrameCount, stride: usize },
     #[error("sample {name}")]

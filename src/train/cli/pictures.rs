@@ -151,6 +151,7 @@ mod tests {
             restarts: 2,
             seed: 0,
             refine: None,
+            from_truth: false,
         };
         let rows: Vec<EvalRow> = samples
             .iter()
