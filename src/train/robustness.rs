@@ -350,9 +350,12 @@ fn evaluate_cell(
 ) -> Result<CellResult, RobustnessError> {
     let mut rows: Vec<EvalRow> = Vec::with_capacity(cell.samples.len());
     for (sequence, sample) in &cell.samples {
+        // The shipped model's card decides what a fit does; a fold model stands in for its
+        // network only.
+        let refines = models.main.card.refines(&sample.points);
         let model = models.for_sequence(sequence)?;
         let eval = EvalSettings {
-            refine: eval.refine.filter(|_| model.card.refines(&sample.points)),
+            refine: eval.refine.filter(|_| refines),
             ..*eval
         };
         let row = evaluate_sample(model, sample, &eval).map_err(|e| RobustnessError::Fit {
