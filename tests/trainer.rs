@@ -473,22 +473,28 @@ fn train_on_lce_batches_with_validation() {
     );
 }
 
+/// `cv` of a tiny network on three AdelaideRMF fundamental pairs, written to `out`.
+fn cv_args<'a>(pairs: &'a Path, out: &'a Path) -> Vec<&'a str> {
+    let mut args = vec![
+        "cv",
+        "--data",
+        s(pairs),
+        "--model-type",
+        "fundamental",
+        "--out",
+        s(out),
+        "--k-max",
+        "4",
+    ];
+    args.extend(TINY);
+    args
+}
+
 #[test]
 fn cv_resumes_and_summarises_on_adelaide() {
     let data = subset("ad", "adelaidermf", &["biscuit", "book", "cube"]);
     let out = temp("cv");
-    let mut base = vec![
-        "cv",
-        "--data",
-        s(&data),
-        "--model-type",
-        "fundamental",
-        "--out",
-        s(&out),
-        "--k-max",
-        "4",
-    ];
-    base.extend(TINY);
+    let base = cv_args(&data, &out);
     let mut one = base.clone();
     one.extend(["--fold", "book"]);
     ok(&one);
@@ -514,22 +520,13 @@ fn cv_resumes_and_summarises_on_adelaide() {
 fn cv_trains_every_fold_on_the_extra_data_too() {
     let pairs = subset("ad-extra", "adelaidermf", &["biscuit", "book", "cube"]);
     let out = temp("cv-extra");
-    let mut args = vec![
-        "cv",
-        "--data",
-        s(&pairs),
-        "--model-type",
-        "fundamental",
-        "--out",
-        s(&out),
-        "--k-max",
-        "4",
+    let mut args = cv_args(&pairs, &out);
+    args.extend([
         "--fold",
         "book",
         "--train-also",
         "twoview:fundamental,count=2,seed=1",
-    ];
-    args.extend(TINY);
+    ]);
     ok(&args);
     let card: Value = serde_json::from_slice(
         &std::fs::read(out.join("models").join("book").join("model.json")).unwrap(),
