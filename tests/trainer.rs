@@ -280,7 +280,7 @@ fn train_then_eval_on_kt3dmoseg_clips() {
     // recorded metric measured with other test symmetries than the card's, and the leaky
     // diagnostic protocol outside cross-validation.
     let (warm, leaky) = (temp("kt-warm"), temp("kt-leaky"));
-    let refusals: [(Vec<&str>, &str); 3] = [
+    let refusals: [(Vec<&str>, &str); 4] = [
         (
             [
                 &[
@@ -311,6 +311,17 @@ fn train_then_eval_on_kt3dmoseg_clips() {
                 "x",
             ],
             "--record",
+        ),
+        (
+            vec![
+                "eval",
+                "--model",
+                s(&both),
+                "--data",
+                s(&first5),
+                "--refine-from-truth",
+            ],
+            "--refine on",
         ),
         (
             [
