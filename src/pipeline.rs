@@ -109,11 +109,15 @@ pub fn check(model: &LoadedModel, points: &PointSet) -> Result<(), FitError> {
 /// [`frames::FrameSampling::Windows`]). Only trajectories have frames; other kinds pass
 /// unchanged.
 pub fn frames_read(model: &LoadedModel, points: &PointSet) -> Vec<PointSet> {
-    let card = &model.card;
-    if card.kind != Kind::Trajectories || points.dim() == card.input_dim {
+    if read_as_sent(model, points) {
         return vec![points.clone()];
     }
-    frames::resample_windows(points, card.input_dim / 2, card.frames)
+    frames::resample_windows(points, model.card.input_dim / 2, model.card.frames)
+}
+
+/// Whether the network reads `points` as sent: not trajectories, or already the model's frames.
+fn read_as_sent(model: &LoadedModel, points: &PointSet) -> bool {
+    model.card.kind != Kind::Trajectories || points.dim() == model.card.input_dim
 }
 
 /// Stages 1 and 2, the one place the network input is built, for training and serving alike:
@@ -138,9 +142,16 @@ pub fn prepare(
 ) -> Result<Vec<f32>, FitError> {
     check(model, points)?;
     let card = &model.card;
+    let resampled;
+    let read = if read_as_sent(model, points) {
+        points
+    } else {
+        resampled = frames::resample(points, card.input_dim / 2, card.frames);
+        &resampled
+    };
     Ok(network_input(
         card.normalization,
-        &frames_read(model, points).swap_remove(0),
+        read,
         image,
         card.architecture.neighbors,
     ))

@@ -40,7 +40,8 @@ pub enum FrameSampling {
 pub const MAX_WINDOWS: usize = 8;
 
 impl FrameSampling {
-    /// Time of each of `target` frames on an axis of `frames` frames (both ≥ 2 for `Spread`).
+    /// Time of each of `target` frames on an axis of `frames` frames (both ≥ 2 for `Spread`);
+    /// for `Windows`, the first window's.
     pub fn times(self, frames: usize, target: usize) -> Vec<f64> {
         match self {
             FrameSampling::Spread if target > 1 => {
@@ -48,7 +49,10 @@ impl FrameSampling {
                 (0..target).map(|i| i as f64 * step).collect()
             }
             FrameSampling::Spread => vec![0.0],
-            FrameSampling::First if frames >= target => (0..target).map(|i| i as f64).collect(),
+            // Windows: the first window.
+            FrameSampling::First | FrameSampling::Windows if frames >= target => {
+                (0..target).map(|i| i as f64).collect()
+            }
             // Fewer frames than the model reads: spread them, as nothing else is there.
             FrameSampling::First | FrameSampling::Windows => {
                 FrameSampling::Spread.times(frames, target)

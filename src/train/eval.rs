@@ -9,7 +9,7 @@ use crate::metrics::{
     OutlierScore, error_rate, mean_median, model_selection_rate, nmi, outlier_score,
 };
 use crate::pipeline::{self, Embedding, FitError};
-use crate::refine::RefineParams;
+use crate::refine::{self, RefineParams, Refined};
 use crate::registry::LoadedModel;
 
 /// The score of one labelling.
@@ -81,13 +81,16 @@ pub struct EvalSettings {
     pub from_truth: bool,
 }
 
-/// Scores one clustering of the sample's embeddings, K chosen by `selection`.
+/// Scores one clustering of the sample's embeddings, K chosen by `selection`; `truth`, when
+/// refinement starts from the true groups ([`EvalSettings::from_truth`]), is the score of every
+/// clustering.
 fn score(
     sample: &Sample,
     model: &LoadedModel,
     embedding: &Embedding,
     selection: Selection,
     s: &EvalSettings,
+    truth: Option<Score>,
 ) -> Result<(Score, Clustering), FitError> {
     let params = ClusterParams::builder()
         .selection(selection)
@@ -96,35 +99,36 @@ fn score(
         .seed(s.seed)
         .build()?;
     let clustering = pipeline::cluster(model, embedding, &params)?;
-    let score = match &s.refine {
-        None => Score {
+    let score = match (&s.refine, truth) {
+        (_, Some(truth)) => truth,
+        (None, None) => Score {
             k: clustering.k,
             error: error_rate(&sample.labels, &clustering.labels),
             nmi: nmi(&sample.labels, &clustering.labels),
             outliers: None,
         },
-        Some(r) => {
-            let refined = if s.from_truth {
-                let family = model.card.family();
-                crate::refine::refine(&sample.points, &sample.labels, sample.k, family, r, false)
-            } else {
-                pipeline::refine(model, &sample.points, &clustering, r)
-            };
-            let (labels, _) = outliers_as_group(&refined.labels, refined.structures.len());
-            Score {
-                // The structures found, and the outlier group where the sample has one (its
-                // `k` counts it): points flagged on a clean sample cost error, not a K.
-                k: refined.structures.len() + usize::from(sample.outliers),
-                error: error_rate(&sample.labels, &labels),
-                nmi: nmi(&sample.labels, &labels),
-                outliers: sample.outliers.then(|| {
-                    let truth: Vec<bool> = sample.labels.iter().map(|&l| l == 0).collect();
-                    outlier_score(&truth, &refined.labels)
-                }),
-            }
-        }
+        (Some(r), None) => refined_score(
+            sample,
+            &pipeline::refine(model, &sample.points, &clustering, r),
+        ),
     };
     Ok((score, clustering))
+}
+
+/// The score of a refined answer on its sample.
+fn refined_score(sample: &Sample, refined: &Refined) -> Score {
+    let (labels, _) = outliers_as_group(&refined.labels, refined.structures.len());
+    Score {
+        // The structures found, and the outlier group where the sample has one (its `k` counts
+        // it): points flagged on a clean sample cost error, not a K.
+        k: refined.structures.len() + usize::from(sample.outliers),
+        error: error_rate(&sample.labels, &labels),
+        nmi: nmi(&sample.labels, &labels),
+        outliers: sample.outliers.then(|| {
+            let truth: Vec<bool> = sample.labels.iter().map(|&l| l == 0).collect();
+            outlier_score(&truth, &refined.labels)
+        }),
+    }
 }
 
 /// Refined labels scored as a sample's are: the outliers (−1) as one more group, labelled k, as
@@ -154,15 +158,22 @@ pub fn evaluate_sample(
         &model.card.test_symmetries,
         s.seed,
     )?;
+    // Refinement from the true groups does not depend on the clustering: done once.
+    let truth = s.refine.filter(|_| s.from_truth).map(|r| {
+        let family = model.card.family();
+        let refined = refine::refine(&sample.points, &sample.labels, sample.k, family, &r, false);
+        refined_score(sample, &refined)
+    });
+    let score = |selection| score(sample, model, &z, selection, s, truth);
     let by_k = (1..=s.k_max.min(sample.points.len()))
-        .map(|k| Ok(score(sample, model, &z, Selection::Fixed(k), s)?.0))
+        .map(|k| Ok(score(Selection::Fixed(k))?.0))
         .collect::<Result<Vec<Score>, FitError>>()?;
     let known = match sample.k.checked_sub(1).and_then(|i| by_k.get(i)) {
         Some(&known) => known,
-        None => score(sample, model, &z, Selection::Fixed(sample.k), s)?.0,
+        None => score(Selection::Fixed(sample.k))?.0,
     };
-    let (sod, curve) = score(sample, model, &z, Selection::Sod, s)?;
-    let (silhouette, _) = score(sample, model, &z, Selection::Silhouette, s)?;
+    let (sod, curve) = score(Selection::Sod)?;
+    let (silhouette, _) = score(Selection::Silhouette)?;
     let errors_by_k = by_k.iter().map(|score| score.error).collect();
     Ok(EvalRow {
         name: sample.name.clone(),
