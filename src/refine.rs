@@ -107,6 +107,11 @@ pub fn family_for(kind: Kind, name_hint: Option<Family>) -> Family {
 /// One group being refined.
 struct Group {
     fit: geometry::Fit,
+    /// The points `fit` was fitted on: a refit on the same points gives the same fit (fits are
+    /// deterministic), so it is skipped.
+    fitted_on: Vec<usize>,
+    /// Whether `fit`'s type was chosen among the family's (else kept from an earlier fit).
+    type_chosen: bool,
     /// Points it started with.
     start: usize,
     /// Degenerate: keeps its learned points, takes no others.
@@ -141,6 +146,8 @@ pub fn refine(
             Some(Group {
                 fit,
                 start: idx.len(),
+                fitted_on: idx,
+                type_chosen: true,
                 frozen,
             })
         })
@@ -180,11 +187,17 @@ pub fn refine(
                 continue;
             }
             let idx = members(&current, j);
+            if idx == g.fitted_on {
+                continue;
+            }
             let fit = refit_same_type(&idx, g);
             if 2 * idx.len() < g.start || matches!(fit.model, Model::Degenerate { .. }) {
                 *slot = None;
             } else {
                 g.fit = fit;
+                g.fitted_on = idx;
+                // One candidate type: keeping it is choosing it.
+                g.type_chosen = family.candidates().len() == 1;
             }
         }
     }
@@ -194,9 +207,15 @@ pub fn refine(
         let Some(g) = slot.as_mut().filter(|g| moved && !g.frozen) else {
             continue;
         };
-        let fit = fit_on(&members(&current, j));
+        let idx = members(&current, j);
+        if g.type_chosen && idx == g.fitted_on {
+            continue;
+        }
+        let fit = fit_on(&idx);
         if !matches!(fit.model, Model::Degenerate { .. }) {
             g.fit = fit;
+            g.fitted_on = idx;
+            g.type_chosen = true;
         }
     }
     if merge_structures && family != Family::Subspace {
@@ -305,6 +324,10 @@ fn merge(
         if let Some(g) = groups[ja].as_mut() {
             g.start += absorbed;
             g.fit = fit;
+            g.fitted_on = (0..current.len())
+                .filter(|&i| current[i] == ja as i64)
+                .collect();
+            g.type_chosen = true;
         }
     }
 }

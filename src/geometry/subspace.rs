@@ -52,14 +52,34 @@ pub fn subspace_distance(mean: &[f64], basis: &[Vec<f64>], row: &[f64]) -> f64 {
     if row.len() != d || d < 2 || basis.iter().any(|b| b.len() != d) {
         return f64::INFINITY;
     }
-    let mut c: Vec<f64> = row.iter().zip(mean).map(|(x, m)| x - m).collect();
-    for b in basis {
-        let proj: f64 = c.iter().zip(b).map(|(x, y)| x * y).sum();
-        for (ci, bi) in c.iter_mut().zip(b) {
-            *ci -= proj * bi;
+    // The coordinates of the centred track on each basis row (the basis is orthonormal), then
+    // the squared norm of what they leave, with the centred track formed on the fly: no
+    // allocation on this path, which every reassignment takes for every track and structure.
+    if basis.len() > MAX_RANK {
+        // Not a fitted model (fits stop at MAX_RANK): projections removed one at a time.
+        let mut c: Vec<f64> = row.iter().zip(mean).map(|(x, m)| x - m).collect();
+        for b in basis {
+            let p: f64 = c.iter().zip(b).map(|(x, y)| x * y).sum();
+            c.iter_mut().zip(b).for_each(|(x, y)| *x -= p * y);
+        }
+        return (c.iter().map(|v| v * v).sum::<f64>() / (d / 2) as f64).sqrt();
+    }
+    let mut coords = [0.0; MAX_RANK];
+    let coords = &mut coords[..basis.len()];
+    for (j, (x, m)) in row.iter().zip(mean).enumerate() {
+        let c = x - m;
+        for (p, b) in coords.iter_mut().zip(basis) {
+            *p += c * b[j];
         }
     }
-    let e2: f64 = c.iter().map(|v| v * v).sum();
+    let mut e2 = 0.0;
+    for (j, (x, m)) in row.iter().zip(mean).enumerate() {
+        let mut c = x - m;
+        for (p, b) in coords.iter().zip(basis) {
+            c -= p * b[j];
+        }
+        e2 += c * c;
+    }
     (e2 / (d / 2) as f64).sqrt()
 }
 
@@ -88,18 +108,13 @@ fn principal(
         }
     }
     mean.iter_mut().for_each(|m| *m /= sw);
-    // Centred, √w-scaled tracks.
-    let centred: Vec<Vec<f64>> = active
-        .iter()
-        .map(|&i| {
-            let s = weights[i].sqrt();
-            tracks[i]
-                .iter()
-                .zip(&mean)
-                .map(|(x, m)| s * (x - m))
-                .collect()
-        })
-        .collect();
+    // Centred, √w-scaled tracks: row i of the m × d block, in one buffer.
+    let mut flat = Vec::with_capacity(active.len() * d);
+    for &i in &active {
+        let s = weights[i].sqrt();
+        flat.extend(tracks[i].iter().zip(&mean).map(|(x, m)| s * (x - m)));
+    }
+    let centred: Vec<&[f64]> = flat.chunks_exact(d.max(1)).collect();
     let m = centred.len();
     let (values, basis): (Vec<f64>, Vec<Vec<f64>>) = if m >= d {
         let mut scatter = lower_scatter(&centred, d);
@@ -121,7 +136,7 @@ fn principal(
         let mut gram = vec![0.0; m * m];
         for i in 0..m {
             for j in 0..=i {
-                gram[i * m + j] = centred[i].iter().zip(&centred[j]).map(|(a, b)| a * b).sum();
+                gram[i * m + j] = centred[i].iter().zip(centred[j]).map(|(a, b)| a * b).sum();
             }
         }
         let e = sym_eigen(&gram, m);
@@ -131,7 +146,7 @@ fn principal(
             let v = e.vector(m - 1 - k);
             let mut u = vec![0.0; d];
             for (c, vi) in centred.iter().zip(&v) {
-                for (uj, cj) in u.iter_mut().zip(c) {
+                for (uj, cj) in u.iter_mut().zip(*c) {
                     *uj += vi * cj;
                 }
             }
@@ -164,7 +179,7 @@ fn principal(
 /// Σ c·cᵀ over the vectors `centred` (length d), lower triangle, d × d row-major. Four vectors
 /// at a time: each load and store of the matrix then carries four multiply-adds (about 3× faster
 /// than one at a time for large d).
-fn lower_scatter(centred: &[Vec<f64>], d: usize) -> Vec<f64> {
+fn lower_scatter(centred: &[&[f64]], d: usize) -> Vec<f64> {
     let mut scatter = vec![0.0; d * d];
     let mut chunks = centred.chunks_exact(4);
     for quad in &mut chunks {
@@ -172,7 +187,7 @@ fn lower_scatter(centred: &[Vec<f64>], d: usize) -> Vec<f64> {
         for i in 0..d {
             let (a0, a1, a2, a3) = (c0[i], c1[i], c2[i], c3[i]);
             let row = &mut scatter[i * d..i * d + i + 1];
-            for ((((s, b0), b1), b2), b3) in row.iter_mut().zip(c0).zip(c1).zip(c2).zip(c3) {
+            for ((((s, b0), b1), b2), b3) in row.iter_mut().zip(*c0).zip(*c1).zip(*c2).zip(*c3) {
                 *s += a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3;
             }
         }
@@ -181,7 +196,7 @@ fn lower_scatter(centred: &[Vec<f64>], d: usize) -> Vec<f64> {
         for i in 0..d {
             let ci = c[i];
             let row = &mut scatter[i * d..i * d + i + 1];
-            for (s, cj) in row.iter_mut().zip(c) {
+            for (s, cj) in row.iter_mut().zip(*c) {
                 *s += ci * cj;
             }
         }
@@ -505,5 +520,23 @@ mod tests {
         let d = subspace_distance(&mean, &basis, &[7.0, 3.0, 0.0, 4.0]);
         assert!((d - 5.0 / 2f64.sqrt()).abs() < 1e-15);
         assert_eq!(subspace_distance(&mean, &basis, &[1.0, 2.0]), f64::INFINITY);
+    }
+
+    #[test]
+    fn distance_is_what_the_basis_leaves_at_every_rank() {
+        // Coordinate axes of R^6 as the basis, offset mean: the distance is the norm of the
+        // coordinates past the rank, for the fitted ranks (up to MAX_RANK) and beyond.
+        let mean = [1.0, -2.0, 0.5, 3.0, 0.0, 4.0];
+        let row = [2.0, 0.0, 3.5, 7.0, 5.0, 16.0];
+        let centred: Vec<f64> = row.iter().zip(&mean).map(|(x, m)| x - m).collect();
+        for rank in 0..=5 {
+            let basis: Vec<Vec<f64>> = (0..rank)
+                .map(|k| (0..6).map(|j| if j == k { 1.0 } else { 0.0 }).collect())
+                .collect();
+            let left: f64 = centred[rank..].iter().map(|c| c * c).sum();
+            let want = (left / 3.0).sqrt();
+            let d = subspace_distance(&mean, &basis, &row);
+            assert!((d - want).abs() < 1e-12, "rank {rank}: {d} against {want}");
+        }
     }
 }
