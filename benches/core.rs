@@ -280,17 +280,19 @@ fn main() {
     ];
     for (name, points, labels, family) in &sets {
         let k = labels.iter().max().map_or(0, |m| m + 1);
-        // K chosen automatically (structures may merge), and a caller's K.
-        for (auto_k, how) in [(true, "K chosen"), (false, "K given")] {
+        // K chosen automatically (structures may merge), a caller's K, and a caller's K without
+        // the hypotheses stage (what it costs).
+        let plain = RefineParams {
+            hypotheses: false,
+            ..RefineParams::default()
+        };
+        for (auto_k, how, params) in [
+            (true, "K chosen", RefineParams::default()),
+            (false, "K given", RefineParams::default()),
+            (false, "K given, no hypotheses", plain),
+        ] {
             let ms = median_ms(reps, || {
-                std::hint::black_box(refine(
-                    points,
-                    labels,
-                    k,
-                    *family,
-                    &RefineParams::default(),
-                    auto_k,
-                ));
+                std::hint::black_box(refine(points, labels, k, *family, &params, auto_k));
             });
             println!(
                 "refine   N={:>5}  {name:<26}, {how}: {ms:>8.2} ms",

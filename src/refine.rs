@@ -14,6 +14,13 @@
 //!    with, or fewer than its model needs, is dropped and its points go to the others in the
 //!    next round. A round that moves no point ends the rounds.
 //!
+//! Before the rounds, models proposed from small neighbourhoods of the input may replace learned
+//! structures where they explain the whole set better ([`hypotheses`]): a learned group that
+//! mixes two structures, or a structure the network spread over several groups, gives a model
+//! that reassignment alone cannot repair. K stays. Motion subspaces take no hypotheses: a rank-3
+//! affine subspace fitted to a handful of nearby tracks also holds tracks of other motions that
+//! move alike, and swapping such subspaces in raised the error on KT3DMoSeg.
+//!
 //! Once the rounds settle, each structure's type is chosen again on its final points (the
 //! learned group it started from may have held foreign points that swayed the first choice),
 //! and every point is assigned once more.
@@ -36,6 +43,8 @@
 //!
 //! Groups whose model is degenerate (too few or collinear points) keep their learned points and
 //! never take others'.
+
+mod hypotheses;
 
 use crate::data::{Kind, PointSet};
 use crate::geometry::{self, Family, Model};
@@ -60,6 +69,9 @@ pub struct RefineParams {
     pub outliers: bool,
     /// A fixed outlier threshold in the caller's units, instead of [`OUTLIER_SIGMAS`] × σ.
     pub threshold: Option<f64>,
+    /// Whether models proposed beyond the learned groups may replace them
+    /// ([`hypotheses`]; never for motion subspaces).
+    pub hypotheses: bool,
 }
 
 impl Default for RefineParams {
@@ -67,6 +79,7 @@ impl Default for RefineParams {
         Self {
             outliers: true,
             threshold: None,
+            hypotheses: true,
         }
     }
 }
@@ -170,6 +183,21 @@ pub fn refine(
         .threshold
         .unwrap_or(OUTLIER_SIGMAS * sigma)
         .max(f64::MIN_POSITIVE);
+    if params.hypotheses && family != Family::Subspace {
+        let live: Vec<Option<&Model>> = groups
+            .iter()
+            .map(|g| g.as_ref().filter(|g| !g.frozen).map(|g| &g.fit.model))
+            .collect();
+        for swap in hypotheses::swaps(points, &live, family, threshold) {
+            groups[swap.slot] = Some(Group {
+                fit: swap.fit,
+                fitted_on: Vec::new(),
+                type_chosen: false,
+                start: (swap.share * n as f64).round() as usize,
+                frozen: false,
+            });
+        }
+    }
     let refit_same_type = |idx: &[usize], g: &Group| {
         let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
         geometry::fit_type(g.fit.model.type_name(), &rows).unwrap_or_else(|| fit_on(idx))
@@ -457,6 +485,7 @@ mod tests {
         let kept = RefineParams {
             outliers: false,
             threshold: None,
+            ..RefineParams::default()
         };
         let r = refine(&points, &start, 2, Family::Curves, &kept, true);
         assert!(r.labels.iter().all(|&l| l >= 0));
@@ -464,9 +493,67 @@ mod tests {
         let wide = RefineParams {
             outliers: true,
             threshold: Some(100.0),
+            ..RefineParams::default()
         };
         let r = refine(&points, &start, 2, Family::Curves, &wide, true);
         assert!(r.labels.iter().all(|&l| l >= 0));
+    }
+
+    #[test]
+    fn a_structure_split_in_two_and_two_mixed_in_one_are_repaired_by_hypotheses() {
+        // Circles of radius 1, 2 and 1.5 around (0, 0), (10, 0) and (0, 10), 60 points each.
+        let centres = [(0.0, 0.0, 1.0), (10.0, 0.0, 2.0), (0.0, 10.0, 1.5)];
+        let (mut values, mut truth) = (Vec::new(), Vec::new());
+        for i in 0..180 {
+            let (cx, cy, r) = centres[i % 3];
+            let t = (i / 3) as f64 * std::f64::consts::TAU / 60.0;
+            let e = 0.01 * (((i * 7919) % 101) as f64 / 50.0 - 1.0);
+            values.extend([cx + (r + e) * t.cos(), cy + (r + e) * t.sin()]);
+            truth.push(i % 3);
+        }
+        let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
+        // The first circle split over groups 0 and 1; the other two mixed in group 2. No model
+        // of a learned group is the third circle, and reassignment alone cannot make one.
+        let start: Vec<usize> = (0..180)
+            .map(|i| match i % 3 {
+                0 => (i / 3) % 2,
+                _ => 2,
+            })
+            .collect();
+        let params = RefineParams {
+            outliers: false,
+            ..RefineParams::default()
+        };
+        let without = RefineParams {
+            hypotheses: false,
+            ..params
+        };
+        let r = refine(&points, &start, 3, Family::Curves, &without, false);
+        let agree = |labels: &[i64]| {
+            // Agreement with the truth under the best matching of labels (3! of them).
+            let perms = [
+                [0, 1, 2],
+                [0, 2, 1],
+                [1, 0, 2],
+                [1, 2, 0],
+                [2, 0, 1],
+                [2, 1, 0],
+            ];
+            perms
+                .iter()
+                .map(|p| (0..180).filter(|&i| labels[i] == p[truth[i]]).count())
+                .max()
+                .unwrap_or(0)
+        };
+        assert!(agree(&r.labels) < 150, "the case needs hypotheses");
+        let r = refine(&points, &start, 3, Family::Curves, &params, false);
+        assert_eq!(agree(&r.labels), 180, "{:?}", r.labels);
+        assert_eq!(r.structures.len(), 3);
+        for s in &r.structures {
+            assert!(matches!(s.model, Model::Circle { .. }), "{:?}", s.model);
+            assert!(s.rms < 0.02, "{}", s.rms);
+        }
+        assert!(finite(&r));
     }
 
     #[test]
@@ -522,6 +609,7 @@ mod tests {
         let params = RefineParams {
             outliers: false,
             threshold: None,
+            ..RefineParams::default()
         };
         let r = refine(&points, &labels, 2, Family::Subspace, &params, true);
         assert_eq!(r.structures.len(), 2);
@@ -598,7 +686,7 @@ mod tests {
             for outliers in [true, false] {
                 let params = RefineParams {
                     outliers,
-                    threshold: None,
+                    ..RefineParams::default()
                 };
                 let r = refine(&points, &labels, k, family, &params, true);
                 assert_eq!(r.labels.len(), points.len(), "{kind} {family:?}");

@@ -87,6 +87,10 @@ struct RobustnessCmd {
     /// (a `cv --out` directory), instead of the shipped model.
     #[arg(long)]
     folds: Option<PathBuf>,
+    /// Whether refinement's hypotheses stage runs (models proposed from neighbourhoods of the
+    /// input may replace learned structures; default on).
+    #[arg(long, value_enum)]
+    hypotheses: Option<Switch>,
 }
 
 #[derive(Args, Debug)]
@@ -168,6 +172,10 @@ struct EvalCmd {
     /// With refinement: whether points may be labelled outliers (−1); default: the card's.
     #[arg(long, value_enum)]
     outliers: Option<Switch>,
+    /// With refinement: whether models proposed from neighbourhoods of the input may replace
+    /// learned structures (default on; never for motion subspaces).
+    #[arg(long, value_enum)]
+    hypotheses: Option<Switch>,
     /// Trajectories: frames per test clip (a number >= 2, or `all`: every frame of the sequence,
     /// on the tracks visible throughout); default: the model's.
     #[arg(long)]
@@ -233,6 +241,7 @@ fn run(command: Command) -> Result<()> {
                 test_symmetry: a.test_symmetry,
                 refine: a.refine,
                 outliers: a.outliers,
+                hypotheses: a.hypotheses,
                 frames: a.frames,
                 stride: a.stride as usize,
                 frame_sampling: a.frame_sampling,
@@ -261,6 +270,7 @@ fn run(command: Command) -> Result<()> {
                 cells: a.cells,
                 data: a.data,
                 model_type: a.model_type,
+                hypotheses: a.hypotheses != Some(Switch::Off),
             };
             println!(
                 "{}",

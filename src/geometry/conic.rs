@@ -362,6 +362,18 @@ fn ellipse_signed_distance(e: &EllipseParams, x: f64, y: f64) -> Option<(f64, [f
     EllipseFrame::new(e)?.signed(x, y)
 }
 
+/// min([`ellipse_distance`], `cap`); a point whose first-order (Sampson) distance exceeds
+/// 2 × `cap` is far from the curve and gets `cap` without the foot-point search.
+pub fn ellipse_distance_capped(e: &EllipseParams, x: f64, y: f64, cap: f64) -> f64 {
+    let Some(frame) = EllipseFrame::new(e) else {
+        return f64::INFINITY;
+    };
+    if frame.sampson(x, y) > 2.0 * cap {
+        return cap;
+    }
+    frame.signed(x, y).map_or(cap, |(d, _)| d.abs().min(cap))
+}
+
 /// Distance of (x, y) to the ellipse; INFINITY for invalid parameters.
 pub fn ellipse_distance(e: &EllipseParams, x: f64, y: f64) -> f64 {
     ellipse_signed_distance(e, x, y).map_or(f64::INFINITY, |(d, _)| d.abs())

@@ -185,6 +185,25 @@ impl Model {
         if r.is_nan() { f64::INFINITY } else { r }
     }
 
+    /// min([`Model::residual`], `cap`), cheaper for an ellipse: a row whose first-order
+    /// (Sampson) distance exceeds 2 × `cap` is far from the curve and gets `cap` without its
+    /// orthogonal distance (which an iterative foot-point search gives).
+    pub fn residual_capped(&self, row: &[f64], cap: f64) -> f64 {
+        let r = match self {
+            Model::Ellipse {
+                cx,
+                cy,
+                a,
+                b,
+                theta,
+            } if row.len() == 2 && row.iter().all(|v| v.is_finite()) => {
+                conic::ellipse_distance_capped(&[*cx, *cy, *a, *b, *theta], row[0], row[1], cap)
+            }
+            _ => self.residual(row),
+        };
+        if r.is_nan() { cap } else { r.min(cap) }
+    }
+
     /// The number of rows that determine a model of this type: line 2, circle 3, ellipse 5,
     /// homography 4, affine 3, fundamental 8, subspace rank + 1; 0 for `Degenerate`.
     pub fn min_points(&self) -> usize {
@@ -254,6 +273,13 @@ pub fn fit(family: Family, rows: &[&[f64]]) -> Fit {
 /// input gives `Some` fit with `Model::Degenerate`.
 pub fn fit_type(type_name: &str, rows: &[&[f64]]) -> Option<Fit> {
     select::fit_one(type_name, rows)
+}
+
+/// The plain least-squares fit of one type by name (no robust loop, no geometric refinement):
+/// a cheap proposal for refinement's hypotheses, not an answer. `None` for an unknown name or
+/// rows that do not determine the model; never a degenerate model.
+pub fn fit_plain(type_name: &str, rows: &[&[f64]]) -> Option<Model> {
+    select::fit_plain(type_name, rows)
 }
 
 /// Why a group's rows do not determine a model of a type. Its text is the `reason` of

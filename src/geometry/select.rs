@@ -52,7 +52,7 @@ use super::line::{self, LineEstimator};
 use super::robust::{
     Estimator, INLIER_SIGMAS, Robust, SIGMA_FLOOR, fit_robust, fit_unrefined, refine_robust,
 };
-use super::subspace::{fit_subspace, subspace_model};
+use super::subspace::{RIGID_RANK, SubspaceEstimator, fit_subspace, subspace_model};
 use super::{Family, Fit, GeometryError, Model, validate};
 
 /// A fitted candidate: the answer and the distance of every row to it in the data space
@@ -207,6 +207,34 @@ pub fn degenerate(reason: impl Into<String>, n: usize) -> Fit {
         inliers: vec![false; n],
         sigma: f64::INFINITY,
     }
+}
+
+/// The plain least-squares fit of one named type on `rows` (unit weights: no robust loop and no
+/// geometric refinement; a subspace of the rigid-motion rank 3): a cheap proposal, not an
+/// answer. `None` for an unknown name or rows that do not determine the model.
+pub fn fit_plain(type_name: &str, rows: &[&[f64]]) -> Option<Model> {
+    fn least_squares<E: Estimator>(est: &E, points: &[E::Point]) -> Option<E::Params> {
+        est.fit(points, &vec![1.0; points.len()]).ok()
+    }
+    let model = match type_name {
+        "line" => line::to_model(least_squares(&LineEstimator, &points2(rows).ok()?)?),
+        "circle" => circle_model(least_squares(&CircleEstimator, &points2(rows).ok()?)?),
+        "ellipse" => ellipse_model(least_squares(&EllipseEstimator, &points2(rows).ok()?)?),
+        "homography" => {
+            homography_model(&least_squares(&HomographyEstimator, &points4(rows).ok()?)?)
+        }
+        "affine" => affine_model(&least_squares(&AffineEstimator, &points4(rows).ok()?)?),
+        "fundamental" => {
+            fundamental_model(&least_squares(&FundamentalEstimator, &points4(rows).ok()?)?)
+        }
+        "subspace" => {
+            validate(rows, None).ok()?;
+            let rank = RIGID_RANK.min(rows.len().saturating_sub(1));
+            subspace_model(&least_squares(&SubspaceEstimator::new(rank), rows)?)
+        }
+        _ => return None,
+    };
+    (!model.is_degenerate()).then_some(model)
 }
 
 /// Fits one named type; `None` for an unknown name.

@@ -259,6 +259,16 @@ pub struct SubspaceEstimator<'a> {
     rows: PhantomData<&'a [f64]>,
 }
 
+impl SubspaceEstimator<'_> {
+    /// The estimator of rank `rank`.
+    pub fn new(rank: usize) -> Self {
+        Self {
+            rank,
+            rows: PhantomData,
+        }
+    }
+}
+
 impl<'a> Estimator for SubspaceEstimator<'a> {
     type Point = &'a [f64];
     type Params = SubspaceParams;

@@ -76,6 +76,13 @@ pub struct GridSettings {
     pub data: Option<PathBuf>,
     /// AdelaideRMF model type (homography, fundamental); `None`: read from the model's name.
     pub model_type: Option<String>,
+    /// Whether refinement's hypotheses stage runs ([`crate::refine::RefineParams::hypotheses`]).
+    #[serde(default = "hypotheses_on")]
+    pub hypotheses: bool,
+}
+
+fn hypotheses_on() -> bool {
+    true
 }
 
 impl GridSettings {
@@ -123,6 +130,7 @@ impl Default for GridSettings {
             cells: vec![],
             data: None,
             model_type: None,
+            hypotheses: true,
         }
     }
 }
@@ -248,7 +256,7 @@ pub fn run(
         folds: folds.map(|d| (d.to_path_buf(), BTreeMap::new())),
     };
     let k_max = settings.k_max.unwrap_or(card.k_max);
-    let eval = eval_settings(&card, k_max, settings.restarts);
+    let eval = eval_settings(&card, k_max, settings.restarts, settings.hypotheses);
     let (columns, reference, mut notes, builders) = match card.kind {
         Kind::Points2d => {
             if folds.is_some() {
@@ -325,7 +333,12 @@ pub fn run(
 
 /// The evaluation `eval` runs by default for this card; refinement applies to the samples a fit
 /// refines by default ([`crate::registry::ModelCard::refines`]).
-fn eval_settings(card: &crate::registry::ModelCard, k_max: usize, restarts: usize) -> EvalSettings {
+fn eval_settings(
+    card: &crate::registry::ModelCard,
+    k_max: usize,
+    restarts: usize,
+    hypotheses: bool,
+) -> EvalSettings {
     EvalSettings {
         k_max,
         restarts,
@@ -333,6 +346,7 @@ fn eval_settings(card: &crate::registry::ModelCard, k_max: usize, restarts: usiz
         refine: Some(crate::refine::RefineParams {
             outliers: card.outliers,
             threshold: None,
+            hypotheses,
         }),
         from_truth: false,
     }

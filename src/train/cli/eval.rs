@@ -85,6 +85,8 @@ pub struct EvalJob {
     pub refine: Option<Switch>,
     /// Outliers on or off instead of the card's choice (with refinement).
     pub outliers: Option<Switch>,
+    /// Hypotheses beyond the learned groups on or off (with refinement; default on).
+    pub hypotheses: Option<Switch>,
     /// Frames per test clip; default: the model's.
     pub frames: Option<FrameCount>,
     /// Every `stride`-th frame for the test clip (at least 1).
@@ -180,6 +182,7 @@ pub fn run(job: &EvalJob) -> Result<Evaluated, CliError> {
             .outliers
             .map_or(model.card.outliers, |o| o == Switch::On),
         threshold: None,
+        hypotheses: job.hypotheses != Some(Switch::Off),
     };
     // Without `--refine`, each sample refines as a fit of it would by default.
     let settings = |s: &Sample| EvalSettings {

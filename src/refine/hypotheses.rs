@@ -1,0 +1,336 @@
+//! Models beyond the learned groups: hypotheses proposed from small neighbourhoods of the input,
+//! grown to every point they explain, and swapped in for a structure where the whole set is
+//! explained better.
+//!
+//! A learned group that mixes two structures, or a structure the network spread over several
+//! groups, starts refinement from a model no reassignment can repair: the points of the missed
+//! structure never fit any live model. Structures are spatially coherent (the points of a curve,
+//! the correspondences of a plane, the tracks of an object lie near one another), so the
+//! neighbourhood of almost any point holds mostly one structure.
+//!
+//! **Proposal.** [`ANCHORS`] anchor points spread over the input (evenly in input order); the
+//! s − 1 points nearest each anchor (Euclidean over the whole row, s = [`NEIGHBOURHOOD_FACTOR`] ×
+//! the largest minimal sample of the family's types, at least [`MIN_NEIGHBOURHOOD`]); one
+//! model of every type of the family fitted to that neighbourhood by plain least squares
+//! ([`geometry::fit_plain`]: proposals need no robustness, the choice below weighs them on every
+//! point), then fitted again [`GROW_ROUNDS`] times on every point within τ of it.
+//!
+//! **Choice.** With residuals r_h(x) and the outlier threshold τ, a set S of m models explains
+//! the points at the truncated quadratic cost C(S) = Σᵢ min(min_{h∈S} r_h(xᵢ)², τ²). Starting
+//! from the learned groups' models, the swap of one model of S for one hypothesis that lowers C
+//! the most is made, while it lowers C by more than [`MIN_GAIN`] × τ² (the cost of that many
+//! outliers), at most [`MAX_SWAPS`] times: the local search of k-medoids (PAM), with hypotheses
+//! as the candidate medoids. m stays the number of structures the learned clustering gave. A
+//! hypothesis that is swapped in is fitted robustly ([`geometry::fit_type`]) on the points it
+//! explains best, and takes the place of the structure it replaced.
+//!
+//! Cost is bounded: proposals and the choice see at most [`MAX_ROWS`] points (evenly in input
+//! order); the refinement rounds that follow refit every chosen model on all points.
+
+use crate::data::PointSet;
+use crate::geometry::{self, Family, Fit, Model};
+
+/// Neighbourhoods proposed per fit.
+pub const ANCHORS: usize = 32;
+/// Points per neighbourhood, in units of the largest minimal sample of the family's types.
+pub const NEIGHBOURHOOD_FACTOR: usize = 2;
+/// The smallest neighbourhood.
+pub const MIN_NEIGHBOURHOOD: usize = 8;
+/// Refits of a hypothesis on the points within τ of it.
+pub const GROW_ROUNDS: usize = 2;
+/// A swap is made when it lowers the cost by more than this many outliers' worth (τ² each).
+pub const MIN_GAIN: f64 = 2.0;
+/// Most swaps per fit.
+pub const MAX_SWAPS: usize = 12;
+/// Points the proposals and the choice see at most.
+pub const MAX_ROWS: usize = 500;
+
+/// One swapped-in model: the slot of the structure it replaces and its fit, with the share of
+/// the points seen that it explains best (within τ).
+pub struct Swap {
+    pub slot: usize,
+    pub fit: Fit,
+    pub share: f64,
+}
+
+/// The swaps that lower the cost of explaining `points` by `current` (one model per slot,
+/// `None` for slots not to be touched), each hypothesis fitted on neighbourhoods of `points`
+/// and grown within `threshold`. `points` `[n, d]` -> the swaps, at most one per slot.
+pub fn swaps(
+    points: &PointSet,
+    current: &[Option<&Model>],
+    family: Family,
+    threshold: f64,
+) -> Vec<Swap> {
+    let slots: Vec<usize> = (0..current.len())
+        .filter(|&j| current[j].is_some())
+        .collect();
+    if slots.is_empty() || !(threshold.is_finite() && threshold > 0.0) {
+        return Vec::new();
+    }
+    let rows = seen_rows(points.len());
+    let tau2 = threshold * threshold;
+    let cost_row = |model: &Model| -> Vec<f64> {
+        rows.iter()
+            .map(|&i| model.residual_capped(points.row(i), threshold).powi(2))
+            .collect()
+    };
+    // The pool: the current models first (pool index = position in `slots`), then hypotheses.
+    let mut pool: Vec<Vec<f64>> = slots
+        .iter()
+        .map(|&j| cost_row(current[j].expect("live slot")))
+        .collect();
+    let hypotheses = propose(points, &rows, family, threshold);
+    pool.extend(hypotheses.iter().map(cost_row));
+    let mut chosen: Vec<usize> = (0..slots.len()).collect();
+    for _ in 0..MAX_SWAPS {
+        let Some((at, h, gain)) = best_swap(&pool, &chosen) else {
+            break;
+        };
+        if gain <= MIN_GAIN * tau2 {
+            break;
+        }
+        chosen[at] = h;
+    }
+    let best = nearest_chosen(&pool, &chosen, tau2);
+    let mut out = Vec::new();
+    for (at, &h) in chosen.iter().enumerate() {
+        if h < slots.len() {
+            continue;
+        }
+        // The answer's fit of a swapped-in hypothesis: robust, of its type, on the rows it
+        // explains best.
+        let mine: Vec<&[f64]> = (0..rows.len())
+            .filter(|&k| best[k] == Some(at))
+            .map(|k| points.row(rows[k]))
+            .collect();
+        let model = &hypotheses[h - slots.len()];
+        let Some(fit) = geometry::fit_type(model.type_name(), &mine) else {
+            continue;
+        };
+        if !fit.model.is_degenerate() {
+            out.push(Swap {
+                slot: slots[at],
+                fit,
+                share: mine.len() as f64 / rows.len() as f64,
+            });
+        }
+    }
+    out
+}
+
+/// The rows proposals and the choice see: all, or [`MAX_ROWS`] evenly spread in input order.
+fn seen_rows(n: usize) -> Vec<usize> {
+    if n <= MAX_ROWS {
+        return (0..n).collect();
+    }
+    (0..MAX_ROWS).map(|k| k * n / MAX_ROWS).collect()
+}
+
+/// Hypotheses of every type of `family`, each fitted on one neighbourhood of the `rows` of
+/// `points` and grown within `threshold`.
+fn propose(points: &PointSet, rows: &[usize], family: Family, threshold: f64) -> Vec<Model> {
+    let types = family.candidates();
+    let largest_sample = types
+        .iter()
+        .map(|t| minimal_sample(t, points.dim()))
+        .max()
+        .unwrap_or(2);
+    let size = (NEIGHBOURHOOD_FACTOR * largest_sample).max(MIN_NEIGHBOURHOOD);
+    if rows.len() < size {
+        return Vec::new();
+    }
+    let anchors = ANCHORS.min(rows.len());
+    let mut out: Vec<Model> = Vec::new();
+    for a in 0..anchors {
+        let anchor = rows[a * rows.len() / anchors];
+        let hood = neighbourhood(points, rows, anchor, size);
+        for t in types {
+            // A neighbourhood a hypothesis of this type already explains would give it again.
+            let known = out.iter().any(|m| {
+                m.type_name() == *t
+                    && hood
+                        .iter()
+                        .all(|&i| m.residual_capped(points.row(i), threshold) < threshold)
+            });
+            if !known {
+                out.extend(grow(points, rows, t, &hood, threshold));
+            }
+        }
+    }
+    out
+}
+
+/// The rows of a minimal sample of a model type (a subspace of a rigid motion: rank 3 + 1).
+fn minimal_sample(type_name: &str, dim: usize) -> usize {
+    match type_name {
+        "line" => 2,
+        "circle" | "affine" => 3,
+        "homography" => 4,
+        "ellipse" => 5,
+        "fundamental" => 8,
+        "subspace" => 4.min(dim.saturating_sub(1)) + 1,
+        _ => 2,
+    }
+}
+
+/// `anchor` and the `size` − 1 rows nearest it among `rows` (Euclidean over the whole row).
+fn neighbourhood(points: &PointSet, rows: &[usize], anchor: usize, size: usize) -> Vec<usize> {
+    let p = points.row(anchor);
+    let mut by_distance: Vec<(f64, usize)> = rows
+        .iter()
+        .map(|&i| {
+            let q = points.row(i);
+            let d2: f64 = p.iter().zip(q).map(|(a, b)| (a - b) * (a - b)).sum();
+            (d2, i)
+        })
+        .collect();
+    let size = size.min(by_distance.len());
+    by_distance.select_nth_unstable_by(size - 1, |a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    by_distance[..size].iter().map(|&(_, i)| i).collect()
+}
+
+/// A model of `type_name` fitted on `hood` by plain least squares ([`geometry::fit_plain`]),
+/// then again on the `rows` within `threshold` of it, [`GROW_ROUNDS`] times; `None` when `hood`
+/// does not determine one.
+fn grow(
+    points: &PointSet,
+    rows: &[usize],
+    type_name: &str,
+    hood: &[usize],
+    threshold: f64,
+) -> Option<Model> {
+    let fit_on = |idx: &[usize]| {
+        let r: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
+        geometry::fit_plain(type_name, &r)
+    };
+    let mut model = fit_on(hood)?;
+    for _ in 0..GROW_ROUNDS {
+        let within = explained(points, rows, &model, threshold);
+        if within.len() <= hood.len() {
+            break;
+        }
+        match fit_on(&within) {
+            Some(m) => model = m,
+            None => break,
+        }
+    }
+    Some(model)
+}
+
+/// The `rows` closer than `threshold` to `model`.
+fn explained(points: &PointSet, rows: &[usize], model: &Model, threshold: f64) -> Vec<usize> {
+    rows.iter()
+        .copied()
+        .filter(|&i| model.residual_capped(points.row(i), threshold) < threshold)
+        .collect()
+}
+
+/// The swap (position in `chosen`, pool index, gain) that lowers the cost the most, over every
+/// position and every pool entry not chosen; `None` when nothing is left to try.
+/// pool: [h][rows] truncated squared residuals.
+fn best_swap(pool: &[Vec<f64>], chosen: &[usize]) -> Option<(usize, usize, f64)> {
+    let n = pool.first().map_or(0, Vec::len);
+    // The best and second-best chosen cost of every row, and which position gives the best.
+    let mut first = vec![f64::INFINITY; n];
+    let mut second = vec![f64::INFINITY; n];
+    let mut owner = vec![usize::MAX; n];
+    for (at, &h) in chosen.iter().enumerate() {
+        for (i, &c) in pool[h].iter().enumerate() {
+            if c < first[i] {
+                second[i] = first[i];
+                first[i] = c;
+                owner[i] = at;
+            } else if c < second[i] {
+                second[i] = c;
+            }
+        }
+    }
+    let now: f64 = first.iter().sum();
+    let mut best: Option<(usize, usize, f64)> = None;
+    for at in 0..chosen.len() {
+        // Each row's cost without position `at`.
+        let without: Vec<f64> = (0..n)
+            .map(|i| if owner[i] == at { second[i] } else { first[i] })
+            .collect();
+        for (h, costs) in pool.iter().enumerate() {
+            if chosen.contains(&h) {
+                continue;
+            }
+            let after: f64 = costs.iter().zip(&without).map(|(&c, &w)| c.min(w)).sum();
+            let gain = now - after;
+            if best.is_none_or(|b| gain > b.2) {
+                best = Some((at, h, gain));
+            }
+        }
+    }
+    best
+}
+
+/// For each row, the position in `chosen` whose model explains it best, when within τ (its
+/// cost below `tau2`).
+fn nearest_chosen(pool: &[Vec<f64>], chosen: &[usize], tau2: f64) -> Vec<Option<usize>> {
+    let n = pool.first().map_or(0, Vec::len);
+    (0..n)
+        .map(|i| {
+            chosen
+                .iter()
+                .enumerate()
+                .map(|(at, &h)| (at, pool[h][i]))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .filter(|&(_, c)| c < tau2)
+                .map(|(at, _)| at)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_swap_that_lowers_the_cost_most_is_found() {
+        // Three rows, costs truncated at 4: the chosen model (0) explains row 0, hypothesis 1
+        // rows 0 and 1 roughly, hypothesis 2 rows 1 and 2 exactly.
+        let pool = vec![
+            vec![0.0, 4.0, 4.0],
+            vec![1.0, 1.0, 4.0],
+            vec![4.0, 0.0, 0.0],
+        ];
+        // Cost 8; 6 with hypothesis 1 instead, 4 with hypothesis 2.
+        assert_eq!(best_swap(&pool, &[0]), Some((0, 2, 4.0)));
+        // Cost 5 with 0 and 1 chosen; 0 and 2 explain every row.
+        assert_eq!(best_swap(&pool, &[0, 1]), Some((1, 2, 5.0)));
+        assert_eq!(
+            nearest_chosen(&pool, &[2, 1], 4.0),
+            vec![Some(1), Some(0), Some(0)]
+        );
+        // Nothing left to try.
+        assert_eq!(best_swap(&pool[..1], &[0]), None);
+    }
+
+    #[test]
+    fn large_sets_are_seen_evenly_and_tiny_ones_propose_nothing() {
+        let rows = seen_rows(10 * MAX_ROWS);
+        assert_eq!(rows.len(), MAX_ROWS);
+        assert_eq!(
+            (rows[0], rows[1], rows[MAX_ROWS - 1]),
+            (0, 10, 10 * MAX_ROWS - 10)
+        );
+        assert_eq!(seen_rows(3), vec![0, 1, 2]);
+        let three = PointSet::from_flat(
+            crate::data::Kind::Points2d,
+            2,
+            vec![0.0, 0.0, 1.0, 0.0, 2.0, 0.0],
+        )
+        .unwrap();
+        assert!(propose(&three, &[0, 1, 2], Family::Curves, 0.1).is_empty());
+        let line = Model::Line {
+            a: 0.0,
+            b: 1.0,
+            c: 0.0,
+        };
+        assert!(swaps(&three, &[Some(&line)], Family::Curves, 0.1).is_empty());
+        assert!(swaps(&three, &[Some(&line)], Family::Curves, f64::NAN).is_empty());
+    }
+}
