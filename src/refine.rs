@@ -20,9 +20,10 @@
 //! Before the rounds, models proposed from small neighbourhoods of the input may replace learned
 //! structures where they explain the whole set better ([`hypotheses`]): a learned group that
 //! mixes two structures, or a structure the network spread over several groups, gives a model
-//! that reassignment alone cannot repair. K stays. Motion subspaces take no hypotheses: a rank-3
-//! affine subspace fitted to a handful of nearby tracks also holds tracks of other motions that
-//! move alike, and swapping such subspaces in raised the error on KT3DMoSeg.
+//! that reassignment alone cannot repair. A K the caller gave stays; a K chosen automatically may
+//! grow by structures that explain points no structure does. Motion subspaces take no
+//! hypotheses: a rank-3 affine subspace fitted to a handful of nearby tracks also holds tracks of
+//! other motions that move alike, and swapping such subspaces in raised the error on KT3DMoSeg.
 //!
 //! Once the rounds settle, each structure's type is chosen again on its final points (the
 //! learned group it started from may have held foreign points that swayed the first choice),
@@ -193,14 +194,18 @@ pub fn refine(
             .iter()
             .map(|g| g.as_ref().filter(|g| !g.frozen).map(|g| &g.fit.model))
             .collect();
-        for swap in hypotheses::swaps(points, &live, family, threshold) {
-            groups[swap.slot] = Some(Group {
+        for swap in hypotheses::swaps(points, &live, family, threshold, k_chosen) {
+            let group = Some(Group {
                 fit: swap.fit,
                 fitted_on: Vec::new(),
                 type_chosen: false,
                 start: (swap.share * n as f64).round() as usize,
                 frozen: false,
             });
+            match swap.slot {
+                Some(j) => groups[j] = group,
+                None => groups.push(group),
+            }
         }
     }
     let refit_same_type = |idx: &[usize], g: &Group| {
@@ -437,6 +442,24 @@ mod tests {
         )
     }
 
+    /// Circles of radius 1, 2 and 1.5 around (0, 0), (10, 0) and (0, 10), 60 points each spread
+    /// evenly, interleaved (point i on circle i mod 3), with deterministic noise of about 0.01.
+    fn three_circles() -> (PointSet, Vec<usize>) {
+        let centres = [(0.0, 0.0, 1.0), (10.0, 0.0, 2.0), (0.0, 10.0, 1.5)];
+        let (mut values, mut truth) = (Vec::new(), Vec::new());
+        for i in 0..180 {
+            let (cx, cy, r) = centres[i % 3];
+            let t = (i / 3) as f64 * std::f64::consts::TAU / 60.0;
+            let e = 0.01 * (((i * 7919) % 101) as f64 / 50.0 - 1.0);
+            values.extend([cx + (r + e) * t.cos(), cy + (r + e) * t.sin()]);
+            truth.push(i % 3);
+        }
+        (
+            PointSet::from_flat(Kind::Points2d, 2, values).unwrap(),
+            truth,
+        )
+    }
+
     fn finite(refined: &Refined) -> bool {
         refined.sigma.is_finite()
             && refined.structures.iter().all(|s| {
@@ -514,17 +537,7 @@ mod tests {
 
     #[test]
     fn a_structure_split_in_two_and_two_mixed_in_one_are_repaired_by_hypotheses() {
-        // Circles of radius 1, 2 and 1.5 around (0, 0), (10, 0) and (0, 10), 60 points each.
-        let centres = [(0.0, 0.0, 1.0), (10.0, 0.0, 2.0), (0.0, 10.0, 1.5)];
-        let (mut values, mut truth) = (Vec::new(), Vec::new());
-        for i in 0..180 {
-            let (cx, cy, r) = centres[i % 3];
-            let t = (i / 3) as f64 * std::f64::consts::TAU / 60.0;
-            let e = 0.01 * (((i * 7919) % 101) as f64 / 50.0 - 1.0);
-            values.extend([cx + (r + e) * t.cos(), cy + (r + e) * t.sin()]);
-            truth.push(i % 3);
-        }
-        let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
+        let (points, truth) = three_circles();
         // The first circle split over groups 0 and 1; the other two mixed in group 2. No model
         // of a learned group is the third circle, and reassignment alone cannot make one.
         let start: Vec<usize> = (0..180)
@@ -567,6 +580,31 @@ mod tests {
             assert!(s.rms < 0.02, "{}", s.rms);
         }
         assert!(finite(&r));
+    }
+
+    #[test]
+    fn a_structure_no_group_holds_is_added_when_k_was_chosen() {
+        // The learned clustering found two groups, the third circle split between them.
+        let (points, truth) = three_circles();
+        let start: Vec<usize> = (0..180)
+            .map(|i| if truth[i] == 2 { (i / 3) % 2 } else { truth[i] })
+            .collect();
+        let params = RefineParams::default();
+        let chosen = refine(&points, &start, 2, Family::Curves, &params, true);
+        assert_eq!(chosen.structures.len(), 3, "{:?}", chosen.structures);
+        for s in &chosen.structures {
+            assert!(matches!(s.model, Model::Circle { .. }), "{:?}", s.model);
+            assert_eq!(s.inliers, 60);
+        }
+        for a in 0..180 {
+            for b in 0..180 {
+                assert_eq!(truth[a] == truth[b], chosen.labels[a] == chosen.labels[b]);
+            }
+        }
+        // A K the caller gave stays.
+        let given = refine(&points, &start, 2, Family::Curves, &params, false);
+        assert_eq!(given.structures.len(), 2);
+        assert!(finite(&chosen) && finite(&given));
     }
 
     #[test]

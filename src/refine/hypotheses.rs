@@ -20,9 +20,16 @@
 //! from the learned groups' models, the swap of one model of S for one hypothesis that lowers C
 //! the most is made, while it lowers C by more than [`MIN_GAIN`] × τ² (the cost of that many
 //! outliers), at most [`MAX_SWAPS`] times: the local search of k-medoids (PAM), with hypotheses
-//! as the candidate medoids. m stays the number of structures the learned clustering gave. A
-//! hypothesis that is swapped in is fitted robustly ([`geometry::fit_type`]) on the points it
-//! explains best, and takes the place of the structure it replaced.
+//! as the candidate medoids. A hypothesis that is swapped in is fitted robustly
+//! ([`geometry::fit_type`]) on the points it explains best, and takes the place of the structure
+//! it replaced.
+//!
+//! **Added structures.** With a K the caller gave, m stays the number of structures the learned
+//! clustering gave. When K was chosen automatically, a hypothesis may also join S as one more
+//! structure, a move that competes with the swaps: its gain in C less a label cost of
+//! max(3 × the family's largest minimal sample, 2 % of the points seen) × τ² ([`label_cost`]),
+//! so that only a model explaining that many points no structure explains is added (a greedy
+//! step of facility location with a label cost, as in PEARL's energy).
 //!
 //! Cost is bounded: proposals and the choice see at most [`MAX_ROWS`] points (evenly in input
 //! order); the refinement rounds that follow refit every chosen model on all points.
@@ -45,22 +52,24 @@ pub const MAX_SWAPS: usize = 12;
 /// Points the proposals and the choice see at most.
 pub const MAX_ROWS: usize = 500;
 
-/// One swapped-in model: the slot of the structure it replaces and its fit, with the share of
-/// the points seen that it explains best (within τ).
+/// One model the search brings in: the slot of the structure it replaces (`None`: a structure
+/// added), its fit, and the share of the points seen that it explains best (within τ).
 pub struct Swap {
-    pub slot: usize,
+    pub slot: Option<usize>,
     pub fit: Fit,
     pub share: f64,
 }
 
-/// The swaps that lower the cost of explaining `points` by `current` (one model per slot,
-/// `None` for slots not to be touched), each hypothesis fitted on neighbourhoods of `points`
-/// and grown within `threshold`. `points` `[n, d]` -> the swaps, at most one per slot.
+/// The swaps (and, when `may_add`, the added structures) that lower the cost of explaining
+/// `points` by `current` (one model per slot, `None` for slots not to be touched), each
+/// hypothesis fitted on neighbourhoods of `points` and grown within `threshold`.
+/// `points` `[n, d]` -> the models brought in, at most one per slot.
 pub fn swaps(
     points: &PointSet,
     current: &[Option<&Model>],
     family: Family,
     threshold: f64,
+    may_add: bool,
 ) -> Vec<Swap> {
     let slots: Vec<usize> = (0..current.len())
         .filter(|&j| current[j].is_some())
@@ -82,20 +91,25 @@ pub fn swaps(
         .collect();
     let hypotheses = propose(points, &rows, family, threshold);
     pool.extend(hypotheses.iter().map(cost_row));
+    let label_cost = label_cost(family, points.dim(), rows.len()) * tau2;
     let mut chosen: Vec<usize> = (0..slots.len()).collect();
     for _ in 0..MAX_SWAPS {
-        let Some((at, h, gain)) = best_swap(&pool, &chosen) else {
-            break;
-        };
-        if gain <= MIN_GAIN * tau2 {
-            break;
+        let swap = best_swap(&pool, &chosen);
+        let add = best_add(&pool, &chosen, slots.len())
+            .filter(|_| may_add)
+            .map(|(h, gain)| (h, gain - label_cost));
+        match (swap, add) {
+            (_, Some((h, net))) if net > MIN_GAIN * tau2 && swap.is_none_or(|s| net > s.2) => {
+                chosen.push(h);
+            }
+            (Some((at, h, gain)), _) if gain > MIN_GAIN * tau2 => chosen[at] = h,
+            _ => break,
         }
-        chosen[at] = h;
     }
     let best = nearest_chosen(&pool, &chosen, tau2);
     let mut out = Vec::new();
     for (at, &h) in chosen.iter().enumerate() {
-        if h < slots.len() {
+        if h < slots.len() && at < slots.len() {
             continue;
         }
         // The answer's fit of a swapped-in hypothesis: robust, of its type, on the rows it
@@ -110,7 +124,7 @@ pub fn swaps(
         };
         if !fit.model.is_degenerate() {
             out.push(Swap {
-                slot: slots[at],
+                slot: slots.get(at).copied(),
                 fit,
                 share: mine.len() as f64 / rows.len() as f64,
             });
@@ -267,6 +281,48 @@ fn best_swap(pool: &[Vec<f64>], chosen: &[usize]) -> Option<(usize, usize, f64)>
     best
 }
 
+/// The price of one more structure, in outliers' worth (units of τ²): 3 × the family's largest
+/// minimal sample, or 2 % of the `rows` seen if more. A structure is added only where it
+/// explains that many points that no current structure does.
+fn label_cost(family: Family, dim: usize, rows: usize) -> f64 {
+    let largest = family
+        .candidates()
+        .iter()
+        .map(|t| minimal_sample(t, dim))
+        .max()
+        .unwrap_or(2);
+    (3 * largest).max(rows / 50) as f64
+}
+
+/// The hypothesis (pool index `from` on) whose addition to `chosen` lowers the cost the most,
+/// with that gain; `None` when every one is chosen. pool: [h][rows] truncated squared residuals.
+fn best_add(pool: &[Vec<f64>], chosen: &[usize], from: usize) -> Option<(usize, f64)> {
+    let n = pool.first().map_or(0, Vec::len);
+    let first: Vec<f64> = (0..n)
+        .map(|i| {
+            chosen
+                .iter()
+                .map(|&h| pool[h][i])
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    let mut best: Option<(usize, f64)> = None;
+    for (h, costs) in pool.iter().enumerate().skip(from) {
+        if chosen.contains(&h) {
+            continue;
+        }
+        let gain: f64 = costs
+            .iter()
+            .zip(&first)
+            .map(|(&c, &f)| (f - c).max(0.0))
+            .sum();
+        if best.is_none_or(|b| gain > b.1) {
+            best = Some((h, gain));
+        }
+    }
+    best
+}
+
 /// For each row, the position in `chosen` whose model explains it best, when within τ (its
 /// cost below `tau2`).
 fn nearest_chosen(pool: &[Vec<f64>], chosen: &[usize], tau2: f64) -> Vec<Option<usize>> {
@@ -330,7 +386,7 @@ mod tests {
             b: 1.0,
             c: 0.0,
         };
-        assert!(swaps(&three, &[Some(&line)], Family::Curves, 0.1).is_empty());
-        assert!(swaps(&three, &[Some(&line)], Family::Curves, f64::NAN).is_empty());
+        assert!(swaps(&three, &[Some(&line)], Family::Curves, 0.1, true).is_empty());
+        assert!(swaps(&three, &[Some(&line)], Family::Curves, f64::NAN, true).is_empty());
     }
 }
