@@ -8,17 +8,25 @@ It does the same work as the Rust server for one point set:
      `(p - image centre) / (max(w, h) / 2)`; without an image size the bounding box of all pairs
      stands in for the image;
    - `centroid_unit_rms` (points2d): centred on the mean, scaled to unit RMS distance;
-2. optionally append the offsets to the `neighbors` nearest points (`src/data/features.rs`;
-   only the `lce` model uses it);
+   Tracks of another length than the model's are first read at the card's `frames`
+   (`src/data/frames.rs`): for `windows`, one set per window of consecutive frames, each
+   normalised, embedded and set side by side (scaled by 1/sqrt(windows));
+2. optionally append the offsets to the `neighbors` nearest points (`src/data/features.rs`);
 3. run the embedding network (`src/model.rs`) in float32 with the shipped weights:
    `x @ W + b` (weights are stored `[d_in, d_out]`), then `depth` residual blocks
-   `h = relu(BN?(CN(x @ W1))); h = relu(BN?(CN(h @ W2))); x = x + h`, then the output Linear and
-   a per-row L2 normalisation. Context Normalization (CN) standardises each channel over the
-   points with the biased variance and `card.architecture.cn_epsilon`;
+   `h = relu(BN?(CN(x @ W1 [+ mean of (x @ G) over the point's graph neighbourhood])));
+   h = relu(BN?(CN(h @ W2))); x = x + h`, then the output Linear and a per-row L2
+   normalisation. Context Normalization (CN) standardises each channel over the points with the
+   biased variance and `card.architecture.cn_epsilon`; the graph neighbourhood (graph models) is
+   the point and its `graph_neighbors - 1` nearest others in the normalised coordinates;
 4. cluster the embeddings (`src/cluster.rs`) with scikit-learn: `KMeans(k-means++, n_init=4)`
    for K = 1..k_max (k_max + 1 for SOD, capped at N), the residual r(K) = inertia, and K chosen
    by the mean silhouette (`sklearn.metrics.silhouette_score`, on a seeded sample of 3000 points
    beyond 3000, like the server) or by the SOD of log r(K); K = 1 when r(1)/N < 0.01.
+
+The peer has no geometric refinement (the server's stage 5): where the server refines by
+default (tracks of 15 frames or more for `kt3dmoseg`, `lce`, `adelaide-homography`), it does
+more work than the peer, and its labels may differ where refinement moved points.
 
 The random streams differ from the server's (ChaCha8 there, numpy's Mersenne Twister here), so the
 k-means restarts start from different seeds: labels and K usually agree but need not be identical.
@@ -104,6 +112,8 @@ class Model:
         self.neighbors = int(arch.get("neighbors", 0))
         self.eps = np.float32(arch["cn_epsilon"])
         self.embed_dim = int(arch["embed_dim"])
+        self.graph_neighbors = int(arch.get("graph_neighbors", 0))
+        self.frames = self.card.get("frames", "spread")
         t = load_safetensors(directory / "weights.safetensors")
         used = set()
 
@@ -121,6 +131,8 @@ class Model:
         self.blocks = []
         for i in range(int(arch["depth"])):
             block = {"w1": take(f"blocks.{i}.l1.weight"), "w2": take(f"blocks.{i}.l2.weight")}
+            if self.graph_neighbors > 0:
+                block["g"] = take(f"blocks.{i}.agg.weight")
             if arch["batch_norm"]:
                 # burn's BatchNorm in inference: (x - running_mean) / sqrt(running_var + eps)
                 # * gamma + beta. No shipped model uses it, so this path is untested against the
@@ -168,10 +180,8 @@ class Model:
         if k == 0:
             return x
         n, d = x.shape
-        d2 = ((x[:, None, :] - x[None, :, :]) ** 2).sum(axis=2)  # float32, like the server
-        np.fill_diagonal(d2, np.inf)
         take = min(k, n - 1)
-        order = np.argsort(d2, axis=1, kind="stable")[:, :take]  # stable sort: ties by index
+        order = nearest(x, take)
         offsets = x[order] - x[:, None, :]  # [n, take, d]
         out = np.zeros((n, d * (1 + k)), dtype=np.float32)
         out[:, :d] = x
@@ -190,11 +200,29 @@ class Model:
         gamma, beta, mean, var = params
         return (h - mean) / np.sqrt(var + np.float32(BN_EPSILON)) * gamma + beta
 
+    def graph(self, coords: np.ndarray) -> np.ndarray | None:
+        """Normalised points [n, d] -> [n, graph_neighbors]: each point's graph neighbourhood,
+        itself first, then its nearest others (itself again where fewer exist)."""
+        k = self.graph_neighbors
+        if k == 0:
+            return None
+        n = len(coords)
+        take = min(k - 1, n - 1)
+        out = np.repeat(np.arange(n)[:, None], k, axis=1)
+        if take > 0:
+            out[:, 1 : 1 + take] = nearest(coords, take)
+        return out
+
     def embed(self, features: np.ndarray) -> np.ndarray:
         """Network input [n, feature_dim] float32 -> unit embeddings [n, embed_dim] float32."""
         x = features.astype(np.float32, copy=False) @ self.w_in + self.b_in
+        graph = self.graph(features[:, : self.input_dim])
         for blk in self.blocks:
-            h = self._cn(x @ blk["w1"])
+            u = x @ blk["w1"]
+            if graph is not None:
+                # The mean of G x over each point's neighbourhood (itself included).
+                u = u + (x @ blk["g"])[graph].mean(axis=1)
+            h = self._cn(u)
             if "bn1" in blk:
                 h = self._bn(h, blk["bn1"])
             h = np.maximum(h, 0)
@@ -205,15 +233,31 @@ class Model:
         z = x @ self.w_out + self.b_out
         return z / np.maximum(np.linalg.norm(z, axis=1, keepdims=True), np.float32(1e-12))
 
+    # -- 1b. frames (trajectories) ----------------------------------------------------------------
+
+    def windows(self, points: np.ndarray) -> list[np.ndarray]:
+        """Tracks [n, 2F] -> one [n, input_dim] set per window the network reads
+        (`src/data/frames.rs`): the input itself when it has the model's width or is not
+        trajectories."""
+        if self.kind != "trajectories" or points.shape[1] == self.input_dim:
+            return [points]
+        frames, target = points.shape[1] // 2, self.input_dim // 2
+        return [read_at(points, t) for t in frame_windows(self.frames, frames, target)]
+
     # -- the whole pipeline -----------------------------------------------------------------------
 
     def fit(self, points, image_size=None, k=None, k_max=None, selection=None, seed=0) -> dict:
         """Normalise, embed and cluster one point set; an answer shaped like the server's."""
         t0 = time.perf_counter()
-        x = self.normalise(points, image_size)
-        if x.ndim != 2 or x.shape[1] != self.input_dim:
-            raise ValueError(f"model {self.name} takes rows of {self.input_dim} values")
-        z = self.embed(self.features(x))
+        windows = self.windows(np.asarray(points, dtype=np.float64))
+        blocks = []
+        for read in windows:
+            x = self.normalise(read, image_size)
+            if x.ndim != 2 or x.shape[1] != self.input_dim:
+                raise ValueError(f"model {self.name} takes rows of {self.input_dim} values")
+            blocks.append(self.embed(self.features(x)))
+        # Windows side by side, scaled so that every row keeps unit length.
+        z = np.hstack(blocks) / np.float32(np.sqrt(len(blocks))) if len(blocks) > 1 else blocks[0]
         t1 = time.perf_counter()
         result = cluster(
             z,
@@ -230,6 +274,51 @@ class Model:
             "total": (t2 - t0) * 1e3,
         }
         return result
+
+
+def nearest(x: np.ndarray, take: int) -> np.ndarray:
+    """Points [n, d] float32 -> [n, take]: each point's nearest others, nearest first, ties by
+    index (`src/data/features.rs`)."""
+    d2 = ((x[:, None, :] - x[None, :, :]) ** 2).sum(axis=2)  # float32, like the server
+    np.fill_diagonal(d2, np.inf)
+    return np.argsort(d2, axis=1, kind="stable")[:, :take]  # stable sort: ties by index
+
+
+MAX_WINDOWS = 8  # src/data/frames.rs
+
+
+def frame_times(sampling: str, frames: int, target: int) -> list[float]:
+    """The times of `target` frames on an axis of `frames` (`FrameSampling::times`)."""
+    if sampling == "spread" or frames < target:
+        if target == 1:
+            return [0.0]
+        step = (frames - 1) / (target - 1)
+        return [i * step for i in range(target)]
+    return [float(i) for i in range(target)]
+
+
+def frame_windows(sampling: str, frames: int, target: int) -> list[list[float]]:
+    """The times of each window read (`FrameSampling::windows`)."""
+    if sampling != "windows" or frames <= target:
+        return [frame_times(sampling, frames, target)]
+    count = min(-(-frames // target), MAX_WINDOWS)
+    span = frames - target
+    # Python's round() rounds halves to even; Rust's f64::round rounds them away from zero.
+    starts = [np.floor(w * span / (count - 1) + 0.5) for w in range(count)]
+    return [[s + i for i in range(target)] for s in starts]
+
+
+def read_at(points: np.ndarray, times: list[float]) -> np.ndarray:
+    """Tracks [n, 2F] -> [n, 2 len(times)], linearly interpolated at fractional times."""
+    frames = points.shape[1] // 2
+    xy = points.reshape(len(points), frames, 2)
+    out = []
+    for t in times:
+        lo = min(int(np.floor(t)), frames - 1)
+        hi = min(lo + 1, frames - 1)
+        w = t - lo
+        out.append(xy[:, lo] if w == 0.0 else xy[:, lo] + w * (xy[:, hi] - xy[:, lo]))
+    return np.stack(out, axis=1).reshape(len(points), 2 * len(times))
 
 
 # -- 4. clustering and the choice of K ------------------------------------------------------------
