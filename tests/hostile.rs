@@ -507,6 +507,52 @@ fn cases() -> Vec<Case> {
         br#"{"kind":"points2d","points":[[0,0],[1e9,1e9],[-1e9,5]],"refine":true,"k":3,"outlier_threshold":1e-300}"#.to_vec(),
         Fit(3),
     );
+    // Sets large enough for refinement's hypotheses (models proposed from neighbourhoods,
+    // swapped in or added while K is chosen) made of degenerate pieces.
+    let coincident_and_line: Vec<[f64; 2]> = (0..60)
+        .map(|_| [1.0, 1.0])
+        .chain((0..20).map(|i| [f64::from(i), 2.0 * f64::from(i)]))
+        .collect();
+    fit(
+        &mut cases,
+        "60 coincident points and a line of 20, refined, K chosen",
+        serde_json::to_vec(
+            &json!({"kind": "points2d", "points": coincident_and_line, "refine": true}),
+        )
+        .unwrap(),
+        Fit(80),
+    );
+    let tiny_and_huge: Vec<[f64; 2]> = (0..60)
+        .map(|i| {
+            let t = f64::from(i) * 0.37;
+            if i % 2 == 0 {
+                [1e-7 * t.cos(), 1e-7 * t.sin()]
+            } else {
+                [1e9 * t.cos(), -1e9 * t.sin()]
+            }
+        })
+        .collect();
+    fit(
+        &mut cases,
+        "a circle of radius 1e-7 inside one of 1e9, refined, K chosen",
+        serde_json::to_vec(&json!({"kind": "points2d", "points": tiny_and_huge, "refine": true}))
+            .unwrap(),
+        Fit(60),
+    );
+    let pairs: Vec<[f64; 4]> = (0..40)
+        .map(|_| [5.0, 5.0, 6.0, 6.0])
+        .chain((0..30).map(|i| {
+            let x = f64::from(i);
+            [x, 0.0, x + 1.0, 0.0]
+        }))
+        .collect();
+    fit(
+        &mut cases,
+        "40 coincident correspondences and 30 collinear, refined, K chosen",
+        serde_json::to_vec(&json!({"kind": "correspondences", "points": pairs, "refine": true}))
+            .unwrap(),
+        Fit(70),
+    );
     // Odd but valid numbers: answered 200.
     fit(
         &mut cases,
