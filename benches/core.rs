@@ -292,7 +292,8 @@ fn main() {
             (false, "K given, no hypotheses", plain),
         ] {
             let ms = median_ms(reps, || {
-                std::hint::black_box(refine(points, labels, k, *family, &params, auto_k));
+                let k_chosen = auto_k.then_some(8);
+                std::hint::black_box(refine(points, labels, k, *family, &params, k_chosen));
             });
             println!(
                 "refine   N={:>5}  {name:<26}, {how}: {ms:>8.2} ms",
@@ -317,7 +318,7 @@ fn main() {
         4,
         Family::Curves,
         &RefineParams::default(),
-        false,
+        None,
     );
     let structures: Vec<(usize, &multifit::geometry::Model)> = fitted
         .structures

@@ -309,15 +309,18 @@ pub fn refine(
     clustering: &Clustering,
     params: &RefineParams,
 ) -> Refined {
-    // A K the caller gave is kept: structures merge only when K was chosen.
-    let merge = !matches!(clustering.selection, Selection::Fixed(_));
+    // A K the caller gave is kept; a chosen one may change within the K the choice considered.
+    let k_chosen = (!matches!(clustering.selection, Selection::Fixed(_))).then(|| {
+        let considered = clustering.scores.iter().map(|s| s.0).max();
+        considered.unwrap_or(clustering.k).max(clustering.k)
+    });
     refine::refine(
         points,
         &clustering.labels,
         clustering.k,
         model.card.family(),
         params,
-        merge,
+        k_chosen,
     )
 }
 

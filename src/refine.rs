@@ -136,8 +136,9 @@ struct Group {
 }
 
 /// Refines a clustering of `points` (`labels` in 0..k, one per row) into structures of
-/// `family`; `k_chosen`: K was chosen automatically, so structures that are one may merge (else
-/// the caller gave K, which merging never changes). `points` `[n, d]`, labels `[n]` ->
+/// `family`. `k_chosen`: `Some(k_max)` when K was chosen automatically among 1..=k_max, so
+/// structures that are one may merge and structures may be added up to k_max in all; `None`
+/// when the caller gave K, which merging never changes. `points` `[n, d]`, labels `[n]` ->
 /// labels `[n]` (−1 for outliers) and one model per remaining label.
 pub fn refine(
     points: &PointSet,
@@ -145,10 +146,10 @@ pub fn refine(
     k: usize,
     family: Family,
     params: &RefineParams,
-    k_chosen: bool,
+    k_chosen: Option<usize>,
 ) -> Refined {
     let n = points.len();
-    let keep_shrunk = !k_chosen && keeps_shrunk_structures(family);
+    let keep_shrunk = k_chosen.is_none() && keeps_shrunk_structures(family);
     let members = |labels: &[i64], j: usize| -> Vec<usize> {
         (0..n).filter(|&i| labels[i] == j as i64).collect()
     };
@@ -194,7 +195,10 @@ pub fn refine(
             .iter()
             .map(|g| g.as_ref().filter(|g| !g.frozen).map(|g| &g.fit.model))
             .collect();
-        for swap in hypotheses::swaps(points, &live, family, threshold, k_chosen) {
+        let room = k_chosen.map_or(0, |k_max| {
+            k_max.saturating_sub(live.iter().flatten().count())
+        });
+        for swap in hypotheses::swaps(points, &live, family, threshold, room) {
             let group = Some(Group {
                 fit: swap.fit,
                 fitted_on: Vec::new(),
@@ -257,7 +261,7 @@ pub fn refine(
             g.type_chosen = true;
         }
     }
-    if k_chosen && family != Family::Subspace {
+    if k_chosen.is_some() && family != Family::Subspace {
         merge(points, &mut current, &mut groups, family, sigma);
     }
     // Points of dropped groups that the last round did not move.
@@ -483,7 +487,7 @@ mod tests {
             2,
             Family::Curves,
             &RefineParams::default(),
-            true,
+            Some(8),
         );
         let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
         assert_eq!(r.labels, want);
@@ -514,7 +518,7 @@ mod tests {
             2,
             Family::Curves,
             &RefineParams::default(),
-            true,
+            Some(8),
         );
         assert_eq!(&r.labels[80..], &[-1, -1]);
         assert!(r.labels[..80].iter().all(|&l| l >= 0));
@@ -523,7 +527,7 @@ mod tests {
             threshold: None,
             ..RefineParams::default()
         };
-        let r = refine(&points, &start, 2, Family::Curves, &kept, true);
+        let r = refine(&points, &start, 2, Family::Curves, &kept, Some(8));
         assert!(r.labels.iter().all(|&l| l >= 0));
         // A caller's threshold in its own units: 100 keeps both far points.
         let wide = RefineParams {
@@ -531,7 +535,7 @@ mod tests {
             threshold: Some(100.0),
             ..RefineParams::default()
         };
-        let r = refine(&points, &start, 2, Family::Curves, &wide, true);
+        let r = refine(&points, &start, 2, Family::Curves, &wide, Some(8));
         assert!(r.labels.iter().all(|&l| l >= 0));
     }
 
@@ -554,7 +558,7 @@ mod tests {
             hypotheses: false,
             ..params
         };
-        let r = refine(&points, &start, 3, Family::Curves, &without, false);
+        let r = refine(&points, &start, 3, Family::Curves, &without, None);
         let agree = |labels: &[i64]| {
             // Agreement with the truth under the best matching of labels (3! of them).
             let perms = [
@@ -572,7 +576,7 @@ mod tests {
                 .unwrap_or(0)
         };
         assert!(agree(&r.labels) < 150, "the case needs hypotheses");
-        let r = refine(&points, &start, 3, Family::Curves, &params, false);
+        let r = refine(&points, &start, 3, Family::Curves, &params, None);
         assert_eq!(agree(&r.labels), 180, "{:?}", r.labels);
         assert_eq!(r.structures.len(), 3);
         for s in &r.structures {
@@ -590,7 +594,7 @@ mod tests {
             .map(|i| if truth[i] == 2 { (i / 3) % 2 } else { truth[i] })
             .collect();
         let params = RefineParams::default();
-        let chosen = refine(&points, &start, 2, Family::Curves, &params, true);
+        let chosen = refine(&points, &start, 2, Family::Curves, &params, Some(8));
         assert_eq!(chosen.structures.len(), 3, "{:?}", chosen.structures);
         for s in &chosen.structures {
             assert!(matches!(s.model, Model::Circle { .. }), "{:?}", s.model);
@@ -601,10 +605,12 @@ mod tests {
                 assert_eq!(truth[a] == truth[b], chosen.labels[a] == chosen.labels[b]);
             }
         }
-        // A K the caller gave stays.
-        let given = refine(&points, &start, 2, Family::Curves, &params, false);
+        // A K the caller gave stays, and a chosen K stays within the K the choice considered.
+        let given = refine(&points, &start, 2, Family::Curves, &params, None);
         assert_eq!(given.structures.len(), 2);
-        assert!(finite(&chosen) && finite(&given));
+        let capped = refine(&points, &start, 2, Family::Curves, &params, Some(2));
+        assert_eq!(capped.structures.len(), 2);
+        assert!(finite(&chosen) && finite(&given) && finite(&capped));
     }
 
     #[test]
@@ -622,7 +628,7 @@ mod tests {
             3,
             Family::Curves,
             &RefineParams::default(),
-            true,
+            Some(8),
         );
         assert_eq!(r.structures.len(), 2);
         let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
@@ -662,7 +668,7 @@ mod tests {
             threshold: None,
             ..RefineParams::default()
         };
-        let r = refine(&points, &labels, 2, Family::Subspace, &params, true);
+        let r = refine(&points, &labels, 2, Family::Subspace, &params, Some(8));
         assert_eq!(r.structures.len(), 2);
         let want: Vec<i64> = labels.iter().map(|&l| l as i64).collect();
         assert_eq!(r.labels, want);
@@ -739,7 +745,7 @@ mod tests {
                     outliers,
                     ..RefineParams::default()
                 };
-                let r = refine(&points, &labels, k, family, &params, true);
+                let r = refine(&points, &labels, k, family, &params, Some(8));
                 assert_eq!(r.labels.len(), points.len(), "{kind} {family:?}");
                 assert!(finite(&r), "{kind} {family:?}: {r:?}");
                 let k = r.structures.len() as i64;

@@ -29,7 +29,8 @@
 //! structure, a move that competes with the swaps: its gain in C less a label cost of
 //! max(3 × the family's largest minimal sample, 2 % of the points seen) × τ² ([`label_cost`]),
 //! so that only a model explaining that many points no structure explains is added (a greedy
-//! step of facility location with a label cost, as in PEARL's energy).
+//! step of facility location with a label cost, as in PEARL's energy), and never past the
+//! k_max the choice of K considered.
 //!
 //! Cost is bounded: proposals and the choice see at most [`MAX_ROWS`] points (evenly in input
 //! order); the refinement rounds that follow refit every chosen model on all points.
@@ -60,7 +61,7 @@ pub struct Swap {
     pub share: f64,
 }
 
-/// The swaps (and, when `may_add`, the added structures) that lower the cost of explaining
+/// The swaps (and up to `may_add` added structures) that lower the cost of explaining
 /// `points` by `current` (one model per slot, `None` for slots not to be touched), each
 /// hypothesis fitted on neighbourhoods of `points` and grown within `threshold`.
 /// `points` `[n, d]` -> the models brought in, at most one per slot.
@@ -69,7 +70,7 @@ pub fn swaps(
     current: &[Option<&Model>],
     family: Family,
     threshold: f64,
-    may_add: bool,
+    may_add: usize,
 ) -> Vec<Swap> {
     let slots: Vec<usize> = (0..current.len())
         .filter(|&j| current[j].is_some())
@@ -96,7 +97,7 @@ pub fn swaps(
     for _ in 0..MAX_SWAPS {
         let swap = best_swap(&pool, &chosen);
         let add = best_add(&pool, &chosen, slots.len())
-            .filter(|_| may_add)
+            .filter(|_| chosen.len() < slots.len() + may_add)
             .map(|(h, gain)| (h, gain - label_cost));
         match (swap, add) {
             (_, Some((h, net))) if net > MIN_GAIN * tau2 && swap.is_none_or(|s| net > s.2) => {
@@ -386,7 +387,7 @@ mod tests {
             b: 1.0,
             c: 0.0,
         };
-        assert!(swaps(&three, &[Some(&line)], Family::Curves, 0.1, true).is_empty());
-        assert!(swaps(&three, &[Some(&line)], Family::Curves, f64::NAN, true).is_empty());
+        assert!(swaps(&three, &[Some(&line)], Family::Curves, 0.1, 2).is_empty());
+        assert!(swaps(&three, &[Some(&line)], Family::Curves, f64::NAN, 2).is_empty());
     }
 }

@@ -161,7 +161,7 @@ pub fn evaluate_sample(
     // Refinement from the true groups does not depend on the clustering: done once.
     let truth = s.refine.filter(|_| s.from_truth).map(|r| {
         let family = model.card.family();
-        let refined = refine::refine(&sample.points, &sample.labels, sample.k, family, &r, false);
+        let refined = refine::refine(&sample.points, &sample.labels, sample.k, family, &r, None);
         refined_score(sample, &refined)
     });
     let score = |selection| score(sample, model, &z, selection, s, truth);
