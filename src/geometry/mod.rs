@@ -239,6 +239,17 @@ impl Family {
             Family::Subspace => &["subspace"],
         }
     }
+
+    /// The most rows a model of this family needs ([`Model::min_points`] of its most demanding
+    /// candidate): ellipse 5, homography 4, fundamental 8, a subspace of the highest rank 5.
+    pub fn largest_sample(self) -> usize {
+        match self {
+            Family::Curves => 5,
+            Family::Homography => 4,
+            Family::Fundamental => 8,
+            Family::Subspace => subspace::MAX_RANK + 1,
+        }
+    }
 }
 
 /// A fitted group: its model, the RMS residual over the inliers, which of the given rows are

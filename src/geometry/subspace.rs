@@ -321,10 +321,7 @@ pub fn fit_subspace(tracks: &[&[f64]]) -> Result<Robust<SubspaceParams>, Geometr
     // A first rank on all tracks, at most the rigid-motion rank 3: a higher one would let the
     // subspace swallow a foreign group (its offset is one more direction).
     let rank = select_rank(tracks, scale)?.min(RIGID_RANK);
-    let est = SubspaceEstimator {
-        rank,
-        rows: PhantomData,
-    };
+    let est = SubspaceEstimator::new(rank);
     let robust = fit_robust(&est, tracks, scale)?;
     // The rank once more, on the inliers alone (up to MAX_RANK).
     let inl: Vec<&[f64]> = tracks
@@ -340,10 +337,7 @@ pub fn fit_subspace(tracks: &[&[f64]]) -> Result<Robust<SubspaceParams>, Geometr
     if final_rank == rank {
         return Ok(robust);
     }
-    let est2 = SubspaceEstimator {
-        rank: final_rank,
-        rows: PhantomData,
-    };
+    let est2 = SubspaceEstimator::new(final_rank);
     let w: Vec<f64> = robust
         .inliers
         .iter()

@@ -92,7 +92,7 @@ pub fn swaps(
         .collect();
     let hypotheses = propose(points, &rows, family, threshold);
     pool.extend(hypotheses.iter().map(cost_row));
-    let label_cost = label_cost(family, points.dim(), rows.len()) * tau2;
+    let label_cost = label_cost(family, rows.len()) * tau2;
     let mut chosen: Vec<usize> = (0..slots.len()).collect();
     for _ in 0..MAX_SWAPS {
         let swap = best_swap(&pool, &chosen);
@@ -146,12 +146,7 @@ fn seen_rows(n: usize) -> Vec<usize> {
 /// `points` and grown within `threshold`.
 fn propose(points: &PointSet, rows: &[usize], family: Family, threshold: f64) -> Vec<Model> {
     let types = family.candidates();
-    let largest_sample = types
-        .iter()
-        .map(|t| minimal_sample(t, points.dim()))
-        .max()
-        .unwrap_or(2);
-    let size = (NEIGHBOURHOOD_FACTOR * largest_sample).max(MIN_NEIGHBOURHOOD);
+    let size = (NEIGHBOURHOOD_FACTOR * family.largest_sample()).max(MIN_NEIGHBOURHOOD);
     if rows.len() < size {
         return Vec::new();
     }
@@ -174,19 +169,6 @@ fn propose(points: &PointSet, rows: &[usize], family: Family, threshold: f64) ->
         }
     }
     out
-}
-
-/// The rows of a minimal sample of a model type (a subspace of a rigid motion: rank 3 + 1).
-fn minimal_sample(type_name: &str, dim: usize) -> usize {
-    match type_name {
-        "line" => 2,
-        "circle" | "affine" => 3,
-        "homography" => 4,
-        "ellipse" => 5,
-        "fundamental" => 8,
-        "subspace" => 4.min(dim.saturating_sub(1)) + 1,
-        _ => 2,
-    }
 }
 
 /// `anchor` and the `size` − 1 rows nearest it among `rows` (Euclidean over the whole row).
@@ -285,14 +267,8 @@ fn best_swap(pool: &[Vec<f64>], chosen: &[usize]) -> Option<(usize, usize, f64)>
 /// The price of one more structure, in outliers' worth (units of τ²): 3 × the family's largest
 /// minimal sample, or 2 % of the `rows` seen if more. A structure is added only where it
 /// explains that many points that no current structure does.
-fn label_cost(family: Family, dim: usize, rows: usize) -> f64 {
-    let largest = family
-        .candidates()
-        .iter()
-        .map(|t| minimal_sample(t, dim))
-        .max()
-        .unwrap_or(2);
-    (3 * largest).max(rows / 50) as f64
+fn label_cost(family: Family, rows: usize) -> f64 {
+    (3 * family.largest_sample()).max(rows / 50) as f64
 }
 
 /// The hypothesis (pool index `from` on) whose addition to `chosen` lowers the cost the most,
