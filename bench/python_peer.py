@@ -284,7 +284,7 @@ def nearest(x: np.ndarray, take: int) -> np.ndarray:
     return np.argsort(d2, axis=1, kind="stable")[:, :take]  # stable sort: ties by index
 
 
-MAX_WINDOWS = 8  # src/data/frames.rs
+MAX_WINDOWS = 4  # src/data/frames.rs
 
 
 def frame_times(sampling: str, frames: int, target: int) -> list[float]:
