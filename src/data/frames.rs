@@ -36,10 +36,10 @@ pub enum FrameSampling {
     Windows,
 }
 
-/// The most windows [`FrameSampling::Windows`] reads: each costs one forward pass. Four read
-/// long tracks as well as eight did (synthetic held-out motion, 60 frames: 9.85 against 11.34 %
-/// known K; 30 frames: 6.70 against 7.09; docs/PERFORMANCE.md) at two thirds of the network's
-/// time on 30 frames.
+/// The most windows [`FrameSampling::Windows`] reads: each costs one forward pass. Four give a
+/// lower known-K error than eight on long synthetic tracks (60 frames: 9.85 against 11.34 %;
+/// 30 frames: 6.70 against 7.09; docs/RESULTS.md) for two thirds of the network's time on 30
+/// frames.
 pub const MAX_WINDOWS: usize = 4;
 
 impl FrameSampling {
