@@ -31,7 +31,7 @@ stopped (SIGTERM, then SIGKILL after 15 s) even when a step fails.
     python3 bench/compare.py                              # full run
     python3 bench/compare.py --requests 20 --seconds 5    # quick run
     python3 bench/compare.py --url http://127.0.0.1:8080  # a running server (no worker sweep)
-    # 1000 tracks of 30 frames (the server reads 6 windows of 5 frames and refines):
+    # 1000 tracks of 30 frames (the server reads 4 windows of 5 frames and refines):
     ./target/release/multifit-train gen-motion --out runs/data/motion30-bench --count 1 --seed 7 \
         --frames 30 --motions 4 --points 250
     python3 bench/compare.py --model kt3dmoseg --dataset runs/data/motion30-bench/motion-s7-00000.json
