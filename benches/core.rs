@@ -14,7 +14,7 @@ use multifit::geometry::Family;
 use multifit::loss::{Loss, one_hot};
 use multifit::model::gemm::matmul;
 use multifit::model::{FusedNet, ModelConfig, cpu_device};
-use multifit::refine::{RefineParams, refine};
+use multifit::refine::{RefineParams, refine, refine_on};
 use multifit::registry::LoadedModel;
 use multifit::render::{Picture, fit_svg};
 use multifit::threads::Threads;
@@ -291,14 +291,19 @@ fn main() {
             (false, "K given", RefineParams::default()),
             (false, "K given, no hypotheses", plain),
         ] {
-            let ms = median_ms(reps, || {
-                let k_chosen = auto_k.then_some(8);
-                std::hint::black_box(refine(points, labels, k, *family, &params, k_chosen));
-            });
-            println!(
-                "refine   N={:>5}  {name:<26}, {how}: {ms:>8.2} ms",
-                points.len()
-            );
+            for count in [1, 2] {
+                let pool = Threads::new(count).expect("threads");
+                let ms = median_ms(reps, || {
+                    let k_chosen = auto_k.then_some(8);
+                    std::hint::black_box(refine_on(
+                        points, labels, k, *family, &params, k_chosen, &pool,
+                    ));
+                });
+                println!(
+                    "refine   N={:>5}  {name:<26}, {how}, {count} thread(s): {ms:>8.2} ms",
+                    points.len()
+                );
+            }
         }
     }
 

@@ -217,12 +217,19 @@ pub fn embed(
     seed: u64,
 ) -> Result<Embedding, FitError> {
     check(model, points)?;
-    let windows = frames_read(model, points);
+    let mut windows = frames_read(model, points);
     let (rows, owner) = rows_read(model, &windows[0], image, seed).unzip();
-    let mut blocks = Vec::with_capacity(windows.len());
-    for read in &windows {
-        blocks.push(embed_rows(model, read, rows.as_deref(), image, symmetries)?);
-    }
+    // The windows side by side on the model's threads (each one's neighbour searches run on
+    // one thread; its forward pass spreads over all of them).
+    let pool = model.pool();
+    let blocks = pool
+        .install(|| {
+            pool.map(&mut windows, |read| {
+                embed_rows(model, read, rows.as_deref(), image, symmetries)
+            })
+        })
+        .into_iter()
+        .collect::<Result<Vec<_>, _>>()?;
     let (block_width, width) = (blocks[0].1, blocks[0].1 * blocks.len());
     let values = side_by_side(blocks.into_iter().map(|(v, _)| v).collect(), block_width);
     Ok(Embedding {
@@ -314,13 +321,14 @@ pub fn refine(
         let considered = clustering.scores.iter().map(|s| s.0).max();
         considered.unwrap_or(clustering.k).max(clustering.k)
     });
-    refine::refine(
+    refine::refine_on(
         points,
         &clustering.labels,
         clustering.k,
         model.card.family(),
         params,
         k_chosen,
+        model.pool(),
     )
 }
 

@@ -52,6 +52,7 @@ mod hypotheses;
 
 use crate::data::{Kind, PointSet};
 use crate::geometry::{self, Family, Model};
+use crate::threads::Threads;
 
 /// Most reassignment rounds.
 pub const MAX_ITERATIONS: usize = 10;
@@ -139,7 +140,8 @@ struct Group {
 /// `family`. `k_chosen`: `Some(k_max)` when K was chosen automatically among 1..=k_max, so
 /// structures that are one may merge and structures may be added up to k_max in all; `None`
 /// when the caller gave K, which merging never changes. `points` `[n, d]`, labels `[n]` ->
-/// labels `[n]` (−1 for outliers) and one model per remaining label.
+/// labels `[n]` (−1 for outliers) and one model per remaining label. Runs on the calling
+/// thread; [`refine_on`] spreads it over a fit's threads.
 pub fn refine(
     points: &PointSet,
     labels: &[usize],
@@ -147,6 +149,35 @@ pub fn refine(
     family: Family,
     params: &RefineParams,
     k_chosen: Option<usize>,
+) -> Refined {
+    let threads = Threads::default();
+    refine_on(points, labels, k, family, params, k_chosen, &threads)
+}
+
+/// [`refine`] on `threads`: each group's fit, each pair's joint fit and each point's
+/// assignment are independent pieces, collected in order, so the answer is the same for any
+/// thread count.
+pub fn refine_on(
+    points: &PointSet,
+    labels: &[usize],
+    k: usize,
+    family: Family,
+    params: &RefineParams,
+    k_chosen: Option<usize>,
+    threads: &Threads,
+) -> Refined {
+    threads.install(|| refine_pieces(points, labels, k, family, params, k_chosen, threads))
+}
+
+/// [`refine_on`], on the threads it runs on.
+fn refine_pieces(
+    points: &PointSet,
+    labels: &[usize],
+    k: usize,
+    family: Family,
+    params: &RefineParams,
+    k_chosen: Option<usize>,
+    threads: &Threads,
 ) -> Refined {
     let n = points.len();
     let keep_shrunk = k_chosen.is_none() && keeps_shrunk_structures(family);
@@ -158,20 +189,18 @@ pub fn refine(
         geometry::fit(family, &rows)
     };
     let mut current: Vec<i64> = labels.iter().map(|&l| l as i64).collect();
-    let mut groups: Vec<Option<Group>> = (0..k)
-        .map(|j| {
-            let idx = members(&current, j);
-            let fit = fit_on(&idx);
-            let frozen = matches!(fit.model, Model::Degenerate { .. });
-            Some(Group {
-                fit,
-                start: idx.len(),
-                fitted_on: idx,
-                type_chosen: true,
-                frozen,
-            })
+    let mut groups: Vec<Option<Group>> = threads.map_n(k, |j| {
+        let idx = members(&current, j);
+        let fit = fit_on(&idx);
+        let frozen = matches!(fit.model, Model::Degenerate { .. });
+        Some(Group {
+            fit,
+            start: idx.len(),
+            fitted_on: idx,
+            type_chosen: true,
+            frozen,
         })
-        .collect();
+    });
     let sigma = noise_level(&groups);
     // Outlier groups are dissolved, when outliers may be answered.
     if params.outliers {
@@ -218,21 +247,36 @@ pub fn refine(
     };
     let mut moved = false;
     for _ in 0..MAX_ITERATIONS {
-        let next = assign(points, &current, &groups, params.outliers, threshold);
+        let next = assign(
+            points,
+            &current,
+            &groups,
+            params.outliers,
+            threshold,
+            threads,
+        );
         if next == current {
             break;
         }
         (current, moved) = (next, true);
-        for (j, slot) in groups.iter_mut().enumerate() {
+        // The groups whose points changed, refitted side by side.
+        let mut changed: Vec<(usize, Vec<usize>)> = groups
+            .iter()
+            .enumerate()
+            .filter_map(|(j, slot)| {
+                let g = slot.as_ref().filter(|g| !g.frozen)?;
+                let idx = members(&current, j);
+                (idx != g.fitted_on).then_some((j, idx))
+            })
+            .collect();
+        let fits = threads.map(&mut changed, |(j, idx)| {
+            groups[*j].as_ref().map(|g| refit_same_type(idx, g))
+        });
+        for ((j, idx), fit) in changed.into_iter().zip(fits) {
+            let (slot, Some(fit)) = (&mut groups[j], fit) else {
+                continue;
+            };
             let Some(g) = slot else { continue };
-            if g.frozen {
-                continue;
-            }
-            let idx = members(&current, j);
-            if idx == g.fitted_on {
-                continue;
-            }
-            let fit = refit_same_type(&idx, g);
             let shrunk = 2 * idx.len() < g.start && !keep_shrunk;
             if shrunk || matches!(fit.model, Model::Degenerate { .. }) {
                 *slot = None;
@@ -246,15 +290,20 @@ pub fn refine(
     }
     // The type of each structure, chosen again on its settled points (unmoved groups keep
     // their first fit, which was chosen on the same points).
-    for (j, slot) in groups.iter_mut().enumerate() {
-        let Some(g) = slot.as_mut().filter(|g| moved && !g.frozen) else {
+    let mut settled: Vec<(usize, Vec<usize>)> = groups
+        .iter()
+        .enumerate()
+        .filter_map(|(j, slot)| {
+            let g = slot.as_ref().filter(|g| moved && !g.frozen)?;
+            let idx = members(&current, j);
+            (!g.type_chosen || idx != g.fitted_on).then_some((j, idx))
+        })
+        .collect();
+    let fits = threads.map(&mut settled, |(_, idx)| fit_on(idx));
+    for ((j, idx), fit) in settled.into_iter().zip(fits) {
+        let Some(g) = groups[j].as_mut() else {
             continue;
         };
-        let idx = members(&current, j);
-        if g.type_chosen && idx == g.fitted_on {
-            continue;
-        }
-        let fit = fit_on(&idx);
         if !matches!(fit.model, Model::Degenerate { .. }) {
             g.fit = fit;
             g.fitted_on = idx;
@@ -262,10 +311,17 @@ pub fn refine(
         }
     }
     if k_chosen.is_some() && family != Family::Subspace {
-        merge(points, &mut current, &mut groups, family, sigma);
+        merge(points, &mut current, &mut groups, family, sigma, threads);
     }
     // Points of dropped groups that the last round did not move.
-    let current = assign(points, &current, &groups, params.outliers, threshold);
+    let current = assign(
+        points,
+        &current,
+        &groups,
+        params.outliers,
+        threshold,
+        threads,
+    );
     answer(points, current, groups, sigma)
 }
 
@@ -300,36 +356,35 @@ fn assign(
     groups: &[Option<Group>],
     outliers: bool,
     threshold: f64,
+    threads: &Threads,
 ) -> Vec<i64> {
     let live: Vec<(usize, &Model)> = groups
         .iter()
         .enumerate()
         .filter_map(|(j, g)| g.as_ref().filter(|g| !g.frozen).map(|g| (j, &g.fit.model)))
         .collect();
-    (0..points.len())
-        .map(|i| {
-            let here = current[i];
-            let frozen = here >= 0
-                && groups
-                    .get(here as usize)
-                    .and_then(Option::as_ref)
-                    .is_some_and(|g| g.frozen);
-            if frozen || live.is_empty() {
-                return if frozen || !outliers { here } else { -1 };
-            }
-            let row = points.row(i);
-            let (j, r) = live
-                .iter()
-                .map(|&(j, m)| (j, m.residual(row)))
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .unwrap_or((live[0].0, f64::INFINITY));
-            if outliers && (r.is_nan() || r > threshold) {
-                -1
-            } else {
-                j as i64
-            }
-        })
-        .collect()
+    threads.map_n(points.len(), |i| {
+        let here = current[i];
+        let frozen = here >= 0
+            && groups
+                .get(here as usize)
+                .and_then(Option::as_ref)
+                .is_some_and(|g| g.frozen);
+        if frozen || live.is_empty() {
+            return if frozen || !outliers { here } else { -1 };
+        }
+        let row = points.row(i);
+        let (j, r) = live
+            .iter()
+            .map(|&(j, m)| (j, m.residual(row)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap_or((live[0].0, f64::INFINITY));
+        if outliers && (r.is_nan() || r > threshold) {
+            -1
+        } else {
+            j as i64
+        }
+    })
 }
 
 /// Merges pairs of live structures that one model fits together within [`MERGE_SIGMAS`] × σ,
@@ -340,6 +395,7 @@ fn merge(
     groups: &mut [Option<Group>],
     family: Family,
     sigma: f64,
+    threads: &Threads,
 ) {
     if sigma <= 0.0 {
         return;
@@ -348,20 +404,30 @@ fn merge(
         let live: Vec<usize> = (0..groups.len())
             .filter(|&j| groups[j].as_ref().is_some_and(|g| !g.frozen))
             .collect();
+        let mut pairs: Vec<(usize, usize)> = live
+            .iter()
+            .enumerate()
+            .flat_map(|(a, &ja)| live[a + 1..].iter().map(move |&jb| (ja, jb)))
+            .collect();
+        // Each pair's joint fit side by side; the best one that holds, first in pair order
+        // among equals.
+        let fits = threads.map(&mut pairs, |&mut (ja, jb)| {
+            let rows: Vec<&[f64]> = (0..points.len())
+                .filter(|&i| current[i] == ja as i64 || current[i] == jb as i64)
+                .map(|i| points.row(i))
+                .collect();
+            let fit = geometry::fit(family, &rows);
+            let ok = !matches!(fit.model, Model::Degenerate { .. })
+                && fit.sigma <= MERGE_SIGMAS * sigma
+                && fit.inliers.iter().filter(|&&v| v).count() * 10 >= rows.len() * 9;
+            ok.then_some(fit)
+        });
         let mut best: Option<(f64, usize, usize, geometry::Fit)> = None;
-        for (a, &ja) in live.iter().enumerate() {
-            for &jb in &live[a + 1..] {
-                let rows: Vec<&[f64]> = (0..points.len())
-                    .filter(|&i| current[i] == ja as i64 || current[i] == jb as i64)
-                    .map(|i| points.row(i))
-                    .collect();
-                let fit = geometry::fit(family, &rows);
-                let ok = !matches!(fit.model, Model::Degenerate { .. })
-                    && fit.sigma <= MERGE_SIGMAS * sigma
-                    && fit.inliers.iter().filter(|&&v| v).count() * 10 >= rows.len() * 9;
-                if ok && best.as_ref().is_none_or(|b| fit.sigma < b.0) {
-                    best = Some((fit.sigma, ja, jb, fit));
-                }
+        for ((ja, jb), fit) in pairs.into_iter().zip(fits) {
+            if let Some(fit) = fit
+                && best.as_ref().is_none_or(|b| fit.sigma < b.0)
+            {
+                best = Some((fit.sigma, ja, jb, fit));
             }
         }
         let Some((_, ja, jb, fit)) = best else { return };
@@ -502,6 +568,37 @@ mod tests {
             assert_eq!(s.inliers, 60);
         }
         assert!(finite(&r));
+    }
+
+    #[test]
+    fn the_answer_is_the_same_on_any_number_of_threads() {
+        let (points, _) = three_circles();
+        // Mixed and split groups: rounds that move points, hypotheses and (K chosen) merging.
+        let start: Vec<usize> = (0..180).map(|i| (i / 7 + i % 3) % 4).collect();
+        for k_chosen in [Some(8), None] {
+            let alone = refine(
+                &points,
+                &start,
+                4,
+                Family::Curves,
+                &RefineParams::default(),
+                k_chosen,
+            );
+            for count in [2, 3] {
+                let threads = Threads::new(count).unwrap();
+                let spread = refine_on(
+                    &points,
+                    &start,
+                    4,
+                    Family::Curves,
+                    &RefineParams::default(),
+                    k_chosen,
+                    &threads,
+                );
+                assert_eq!(spread, alone, "{count} threads, {k_chosen:?}");
+            }
+            assert!(finite(&alone));
+        }
     }
 
     #[test]

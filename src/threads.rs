@@ -50,6 +50,14 @@ impl Threads {
         }
     }
 
+    /// `f` over 0..n, results in order. Call inside [`Threads::install`].
+    pub fn map_n<T: Send>(&self, n: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
+        match &self.0 {
+            None => (0..n).map(f).collect(),
+            Some(_) => (0..n).into_par_iter().map(&f).collect(),
+        }
+    }
+
     /// `f` over a range, results in order. Call inside [`Threads::install`].
     pub fn map_range<T: Send>(
         &self,
@@ -74,6 +82,9 @@ mod tests {
             assert_eq!(threads.count(), count.max(1));
             let squares = threads.install(|| threads.map_range(1..=50, |i| i * i));
             assert_eq!(squares, (1..=50).map(|i| i * i).collect::<Vec<_>>());
+            let cubes = threads.install(|| threads.map_n(30, |i| i * i * i));
+            assert_eq!(cubes, (0..30).map(|i| i * i * i).collect::<Vec<_>>());
+            assert!(threads.install(|| threads.map_n(0, |i| i)).is_empty());
             let mut items: Vec<usize> = (0..40).collect();
             let doubled = threads.install(|| {
                 threads.map(&mut items, |v| {
