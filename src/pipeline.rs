@@ -256,14 +256,20 @@ fn embed_rows(
         None => read.clone(),
     };
     let m = read.len();
-    let images = if symmetries.is_empty() {
+    let mut images = if symmetries.is_empty() {
         vec![read]
     } else {
         closure(vec![read], symmetries, |s, p| s.apply_points(p, image))
     };
+    // The images side by side on the model's threads, as the windows are.
+    let pool = model.pool();
     let mut all = Vec::new();
-    for p in &images {
-        all.extend(model.embed_all(&prepare(model, p, image)?));
+    for per_image in pool.install(|| {
+        pool.map(&mut images, |p| {
+            prepare(model, p, image).map(|input| model.embed_all(&input))
+        })
+    }) {
+        all.extend(per_image?);
     }
     let width = e * all.len();
     debug_assert!(all.iter().all(|z| z.len() == m * e));
