@@ -109,17 +109,17 @@ pub fn swaps(
     }
     let best = nearest_chosen(&pool, &chosen, tau2);
     let mut out = Vec::new();
-    for (at, &h) in chosen.iter().enumerate() {
-        if h < slots.len() && at < slots.len() {
-            continue;
-        }
-        // The answer's fit of a swapped-in hypothesis: robust, of its type, on the rows it
-        // explains best.
+    for (at, h) in moved(&chosen) {
+        // The answer's fit of a model the search moved: robust, of its type, on the rows it
+        // explains best. A learned model may come back in another structure's place.
         let mine: Vec<&[f64]> = (0..rows.len())
             .filter(|&k| best[k] == Some(at))
             .map(|k| points.row(rows[k]))
             .collect();
-        let model = &hypotheses[h - slots.len()];
+        let model = match h.checked_sub(slots.len()) {
+            Some(i) => &hypotheses[i],
+            None => current[slots[h]].expect("live slot"),
+        };
         let Some(fit) = geometry::fit_type(model.type_name(), &mine) else {
             continue;
         };
@@ -132,6 +132,18 @@ pub fn swaps(
         }
     }
     out
+}
+
+/// The positions of `chosen` (pool indices, the learned models first, one per position at the
+/// start) that no longer hold the model they started with: (position, pool index). A learned
+/// model the search swapped out and later in again elsewhere counts as moved.
+fn moved(chosen: &[usize]) -> Vec<(usize, usize)> {
+    chosen
+        .iter()
+        .enumerate()
+        .filter(|&(at, &h)| h != at)
+        .map(|(at, &h)| (at, h))
+        .collect()
 }
 
 /// The rows proposals and the choice see: all, or [`MAX_ROWS`] evenly spread in input order.
@@ -340,6 +352,17 @@ mod tests {
         );
         // Nothing left to try.
         assert_eq!(best_swap(&pool[..1], &[0]), None);
+    }
+
+    #[test]
+    fn a_learned_model_swapped_back_in_elsewhere_is_moved() {
+        // Three learned models (pool 0..3), hypotheses from 3 on.
+        assert!(moved(&[0, 1, 2]).is_empty());
+        assert_eq!(moved(&[0, 4, 2]), vec![(1, 4)]);
+        // Model 0 out for hypothesis 5, then back in place of model 2.
+        assert_eq!(moved(&[5, 1, 0]), vec![(0, 5), (2, 0)]);
+        // An added structure (position 3) whose hypothesis was swapped for learned model 1.
+        assert_eq!(moved(&[0, 6, 2, 1]), vec![(1, 6), (3, 1)]);
     }
 
     #[test]
