@@ -378,8 +378,10 @@ pub fn top_eigen(s: &[f64], d: usize, r: usize) -> (Vec<f64>, Vec<Vec<f64>>) {
     };
     // Start: the columns of S (= S·eᵢ) of largest norm, then the unit vectors, orthonormalised.
     let mut order: Vec<usize> = (0..d).collect();
-    let col_norm = |j: usize| (0..d).map(|i| s[i * d + j] * s[i * d + j]).sum::<f64>();
-    order.sort_by(|&a, &b| col_norm(b).total_cmp(&col_norm(a)));
+    let col_norm: Vec<f64> = (0..d)
+        .map(|j| (0..d).map(|i| s[i * d + j] * s[i * d + j]).sum::<f64>())
+        .collect();
+    order.sort_by(|&a, &b| col_norm[b].total_cmp(&col_norm[a]));
     let candidates = order
         .iter()
         .map(|&j| (0..d).map(|i| s[i * d + j]).collect::<Vec<f64>>())
