@@ -40,10 +40,12 @@
 //!
 //! **Merging.** When K was chosen automatically, two structures whose union one model of the
 //! same family fits with a noise level within [`MERGE_SIGMAS`] × σ are one structure seen twice
-//! (K chosen too high), and merge. A K the caller gave is kept. Motion subspaces never merge:
-//! an affine subspace of rank up to 4 holds two rigid motions whose frame-to-frame motion is
-//! small (a hand-held camera at 30 fps) within the noise, though each motion's own subspace
-//! still tells its tracks apart.
+//! (K chosen too high), and merge. Only pairs where each structure's model already explains at
+//! least half of the other's points within τ are fitted jointly: a structure seen twice passes,
+//! while two nearby planes or curves that one loose joint fit would hold within 1.5 σ do not. A
+//! K the caller gave is kept. Motion subspaces never merge: an affine subspace of rank up to 4
+//! holds two rigid motions whose frame-to-frame motion is small (a hand-held camera at 30 fps)
+//! within the noise, though each motion's own subspace still tells its tracks apart.
 //!
 //! Groups whose model is degenerate (too few or collinear points) keep their learned points and
 //! never take others'.
@@ -299,7 +301,15 @@ pub fn refine_on(
             }
         }
         if k_chosen.is_some() && family != Family::Subspace {
-            merge(points, &mut current, &mut groups, family, sigma, threads);
+            merge(
+                points,
+                &mut current,
+                &mut groups,
+                family,
+                sigma,
+                threshold,
+                threads,
+            );
         }
         // Points of dropped groups that the last round did not move.
         let current = assign(
@@ -377,13 +387,16 @@ fn assign(
 }
 
 /// Merges pairs of live structures that one model fits together within [`MERGE_SIGMAS`] × σ,
-/// best pair first, until no pair does.
+/// best pair first, until no pair does. A pair is fitted jointly only where each structure's
+/// model already explains at least half of the other's points within `threshold`: one model
+/// seen twice does, two different ones do not, and the residuals cost far less than the fit.
 fn merge(
     points: &PointSet,
     current: &mut [i64],
     groups: &mut [Option<Group>],
     family: Family,
     sigma: f64,
+    threshold: f64,
     threads: &Threads,
 ) {
     if sigma <= 0.0 {
@@ -400,7 +413,22 @@ fn merge(
             .collect();
         // Each pair's joint fit side by side; the best one that holds, first in pair order
         // among equals.
+        // Whether the model of group `a` explains at least half of group `b`'s points.
+        let explains = |a: usize, b: usize| {
+            let Some(model) = groups[a].as_ref().map(|g| &g.fit.model) else {
+                return false;
+            };
+            let (mut within, mut all) = (0usize, 0usize);
+            for i in (0..points.len()).filter(|&i| current[i] == b as i64) {
+                all += 1;
+                within += usize::from(model.residual_capped(points.row(i), threshold) < threshold);
+            }
+            2 * within >= all
+        };
         let fits = threads.map(&mut pairs, |&mut (ja, jb)| {
+            if !(explains(ja, jb) && explains(jb, ja)) {
+                return None;
+            }
             let rows: Vec<&[f64]> = (0..points.len())
                 .filter(|&i| current[i] == ja as i64 || current[i] == jb as i64)
                 .map(|i| points.row(i))
