@@ -231,9 +231,9 @@ pub fn refine_on(
                 }
             }
         }
-        let refit_same_type = |idx: &[usize], g: &Group| {
+        let refit_same_type = |idx: &[usize], type_name: &str| {
             let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
-            geometry::fit_type(g.fit.model.type_name(), &rows).unwrap_or_else(|| fit_on(idx))
+            geometry::fit_type(type_name, &rows).unwrap_or_else(|| fit_on(idx))
         };
         let mut moved = false;
         for _ in 0..MAX_ITERATIONS {
@@ -249,23 +249,21 @@ pub fn refine_on(
                 break;
             }
             (current, moved) = (next, true);
-            // The groups whose points changed, refitted side by side.
-            let mut changed: Vec<(usize, Vec<usize>)> = groups
+            // The groups whose points changed, refitted side by side with their model's type.
+            let mut changed: Vec<(usize, Vec<usize>, &str)> = groups
                 .iter()
                 .enumerate()
                 .filter_map(|(j, slot)| {
                     let g = slot.as_ref().filter(|g| !g.frozen)?;
                     let idx = members(&current, j);
-                    (idx != g.fitted_on).then_some((j, idx))
+                    (idx != g.fitted_on).then_some((j, idx, g.fit.model.type_name()))
                 })
                 .collect();
-            let fits = threads.map(&mut changed, |(j, idx)| {
-                groups[*j].as_ref().map(|g| refit_same_type(idx, g))
+            let fits = threads.map(&mut changed, |(_, idx, type_name)| {
+                refit_same_type(idx, type_name)
             });
-            for ((j, idx), fit) in changed.into_iter().zip(fits) {
-                let (slot, Some(fit)) = (&mut groups[j], fit) else {
-                    continue;
-                };
+            for ((j, idx, _), fit) in changed.into_iter().zip(fits) {
+                let slot = &mut groups[j];
                 let Some(g) = slot else { continue };
                 let shrunk = 2 * idx.len() < g.start && !keep_shrunk;
                 if shrunk || matches!(fit.model, Model::Degenerate { .. }) {
@@ -411,8 +409,6 @@ fn merge(
             .enumerate()
             .flat_map(|(a, &ja)| live[a + 1..].iter().map(move |&jb| (ja, jb)))
             .collect();
-        // Each pair's joint fit side by side; the best one that holds, first in pair order
-        // among equals.
         // Whether the model of group `a` explains at least half of group `b`'s points.
         let explains = |a: usize, b: usize| {
             let Some(model) = groups[a].as_ref().map(|g| &g.fit.model) else {
@@ -425,6 +421,8 @@ fn merge(
             }
             2 * within >= all
         };
+        // Each pair's joint fit side by side; the best one that holds, first in pair order
+        // among equals.
         let fits = threads.map(&mut pairs, |&mut (ja, jb)| {
             if !(explains(ja, jb) && explains(jb, ja)) {
                 return None;
