@@ -103,6 +103,16 @@ pub struct Sequence {
     pub visible: Option<Vec<Vec<u8>>>,
 }
 
+/// A random stream fixed by `key` alone: FNV-1a of its bytes seeds ChaCha8 (stable across
+/// platforms and releases, unlike std's hasher).
+pub fn seeded_rng(key: &str) -> rand::rngs::ChaCha8Rng {
+    use rand::SeedableRng;
+    let hash = key.bytes().fold(0xcbf29ce484222325u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x100000001b3)
+    });
+    rand::rngs::ChaCha8Rng::seed_from_u64(hash)
+}
+
 /// The family of models sequences follow, when their files say and all agree: AdelaideRMF's
 /// (and the two-view generator's) `model_type` `homography` or `fundamental`; `None` otherwise
 /// (the card's kind then decides, [`crate::registry::ModelCard::family`]).
@@ -206,6 +216,40 @@ impl Sequence {
             image_size: self.image_size,
             outliers: self.labels.contains(&0),
         }
+    }
+
+    /// The rows `rows` of the sequence (labels, visibility and all), in the order given.
+    pub fn rows(&self, rows: &[usize]) -> Sequence {
+        let values: Vec<f64> = rows
+            .iter()
+            .flat_map(|&i| self.points.row(i).iter().copied())
+            .collect();
+        Sequence {
+            name: self.name.clone(),
+            points: PointSet::from_flat(self.points.kind(), self.points.dim(), values)
+                .expect("rows of a valid set"),
+            labels: rows.iter().map(|&i| self.labels[i]).collect(),
+            image_size: self.image_size,
+            model_type: self.model_type.clone(),
+            visible: self
+                .visible
+                .as_ref()
+                .map(|v| rows.iter().map(|&i| v[i].clone()).collect()),
+        }
+    }
+
+    /// `round(share * n)` of the rows (at least 2), drawn without replacement, in their order.
+    pub fn subsample(&self, share: f64, rng: &mut impl rand::RngExt) -> Sequence {
+        let n = self.points.len();
+        let keep = ((share * n as f64).round() as usize).clamp(2.min(n), n);
+        let mut order: Vec<usize> = (0..n).collect();
+        for i in 0..keep {
+            let j = rng.random_range(i..n);
+            order.swap(i, j);
+        }
+        order.truncate(keep);
+        order.sort_unstable();
+        self.rows(&order)
     }
 
     /// Frames `[start, start + len)` of a trajectory sequence: the rows visible in all of those

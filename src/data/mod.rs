@@ -12,7 +12,7 @@ pub mod synthetic;
 pub mod twoview;
 
 pub use dataset::{
-    DataError, DataSource, Sample, Sequence, SequenceFile, SpecError, load_sequences,
+    DataError, DataSource, Sample, Sequence, SequenceFile, SpecError, load_sequences, seeded_rng,
 };
 pub use points::{ImageSize, InputError, Kind, MIN_POINTS, Normalization, PointSet};
 pub use symmetry::{Symmetry, with_symmetries};

@@ -13,12 +13,13 @@
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command};
 
+use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
 use super::eval::{EvalRow, EvalSettings, evaluate_sample};
 use super::{Hooks, TrainConfig, TrainError, checkpoint_err, prepare, train};
 use crate::data::dataset::family_of;
-use crate::data::{Kind, Normalization, Sample, Sequence, Symmetry, with_symmetries};
+use crate::data::{Kind, Normalization, Sample, Sequence, Symmetry, seeded_rng, with_symmetries};
 use crate::registry::{LoadedModel, TrainingInfo, WEIGHTS_FILE, card_for};
 
 /// Which training clips a fold uses.
@@ -55,6 +56,50 @@ pub struct SamplePlan {
     pub clip_stride: usize,
     /// Structure-preserving images added to the training samples (none in the paper).
     pub symmetries: Vec<Symmetry>,
+    /// Copies of every training sequence at lower densities (none in the paper).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub subsample: Option<Subsample>,
+}
+
+/// Copies of a training sequence that keep fewer of its rows: the densities users send (a
+/// matcher or tracker keeps fewer correspondences or tracks than a dataset's annotators did).
+/// Copy c of a sequence keeps a share of its rows drawn uniformly in `[low, high]`, the rows
+/// drawn without replacement ([`Sequence::subsample`]), from a stream fixed by `seed`, the
+/// sequence's name and c.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Subsample {
+    pub low: f64,
+    pub high: f64,
+    pub copies: usize,
+    pub seed: u64,
+}
+
+impl Subsample {
+    pub fn validate(&self) -> Result<(), TrainError> {
+        if !(self.low > 0.0 && self.low <= self.high && self.high <= 1.0) {
+            return Err(TrainError::Config(format!(
+                "subsample shares {}-{} are not within (0, 1] and ascending",
+                self.low, self.high
+            )));
+        }
+        if self.copies == 0 {
+            return Err(TrainError::Config(
+                "subsampled copies must be at least 1".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The subsampled copies of `seq`.
+    pub fn copies(&self, seq: &Sequence) -> Vec<Sequence> {
+        (0..self.copies)
+            .map(|c| {
+                let mut rng = seeded_rng(&format!("{}/subsample/{}/{c}", self.seed, seq.name));
+                let share = rng.random_range(self.low..=self.high);
+                seq.subsample(share, &mut rng)
+            })
+            .collect()
+    }
 }
 
 impl SamplePlan {
@@ -65,7 +110,7 @@ impl SamplePlan {
         if self.clip_stride == 0 {
             return Err(TrainError::Config("clip stride must be at least 1".into()));
         }
-        Ok(())
+        self.subsample.as_ref().map_or(Ok(()), Subsample::validate)
     }
 
     /// The test sample of a sequence: frames 1..clip_len of a trajectory sequence, a
@@ -77,17 +122,22 @@ impl SamplePlan {
         }
     }
 
-    /// The training samples a sequence contributes to the folds that do not hold it out.
+    /// The training samples a sequence contributes to the folds that do not hold it out: its
+    /// clips (or itself), then those of its subsampled copies, each with its symmetric images.
     pub fn train_samples(&self, seq: &Sequence) -> Vec<Sample> {
-        let cut = match (seq.points.kind(), self.protocol) {
-            (Kind::Trajectories, Protocol::Vanilla) => {
-                seq.clip(0, self.clip_len).into_iter().collect()
-            }
-            (Kind::Trajectories, Protocol::Augment | Protocol::AugmentLeaky) => {
-                seq.clips(self.clip_len, self.clip_stride)
-            }
-            _ => vec![seq.sample()],
-        };
+        let copies = self.subsample.map(|s| s.copies(seq)).unwrap_or_default();
+        let cut = std::iter::once(seq)
+            .chain(&copies)
+            .flat_map(|seq| match (seq.points.kind(), self.protocol) {
+                (Kind::Trajectories, Protocol::Vanilla) => {
+                    seq.clip(0, self.clip_len).into_iter().collect()
+                }
+                (Kind::Trajectories, Protocol::Augment | Protocol::AugmentLeaky) => {
+                    seq.clips(self.clip_len, self.clip_stride)
+                }
+                _ => vec![seq.sample()],
+            })
+            .collect();
         with_symmetries(cut, &self.symmetries)
     }
 
@@ -113,6 +163,12 @@ impl SamplePlan {
         }
         if !self.symmetries.is_empty() {
             text.push_str(&format!(", with symmetries {:?}", self.symmetries));
+        }
+        if let Some(s) = &self.subsample {
+            text.push_str(&format!(
+                ", {} subsampled copies keeping {}-{} of the rows",
+                s.copies, s.low, s.high
+            ));
         }
         text
     }

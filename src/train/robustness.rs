@@ -35,13 +35,13 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use rand::rngs::ChaCha8Rng;
-use rand::{RngExt, SeedableRng};
+use rand::RngExt;
 use serde::{Deserialize, Serialize};
 
 use super::eval::{EvalRow, EvalSettings, Summary, Totals, evaluate_sample, totals};
 use crate::cluster::Selection;
 use crate::data::synthetic::{LceConfig, LceSpec, LceVariant};
-use crate::data::{ImageSize, Kind, PointSet, Sample, Sequence, load_sequences};
+use crate::data::{ImageSize, Kind, PointSet, Sample, Sequence, load_sequences, seeded_rng};
 use crate::registry::LoadedModel;
 
 /// Why the grid could not run.
@@ -560,46 +560,7 @@ fn real_sequences(
 
 /// A seeded generator for one draw of one sequence in one cell.
 fn rng_for(seed: u64, cell: &str, sequence: &str, draw: usize) -> ChaCha8Rng {
-    // FNV-1a: stable across platforms and releases, unlike std's hasher.
-    let text = format!("{seed}/{cell}/{sequence}/{draw}");
-    let hash = text.bytes().fold(0xcbf29ce484222325u64, |h, b| {
-        (h ^ u64::from(b)).wrapping_mul(0x100000001b3)
-    });
-    ChaCha8Rng::seed_from_u64(hash)
-}
-
-/// The rows `rows` of a sequence (labels, visibility and all).
-fn subset(seq: &Sequence, rows: &[usize]) -> Sequence {
-    let values: Vec<f64> = rows
-        .iter()
-        .flat_map(|&i| seq.points.row(i).iter().copied())
-        .collect();
-    Sequence {
-        name: seq.name.clone(),
-        points: PointSet::from_flat(seq.points.kind(), seq.points.dim(), values)
-            .expect("rows of a valid set"),
-        labels: rows.iter().map(|&i| seq.labels[i]).collect(),
-        image_size: seq.image_size,
-        model_type: seq.model_type.clone(),
-        visible: seq
-            .visible
-            .as_ref()
-            .map(|v| rows.iter().map(|&i| v[i].clone()).collect()),
-    }
-}
-
-/// `round(share * n)` of the rows (at least 2), drawn without replacement, in their order.
-pub fn subsample(seq: &Sequence, share: f64, rng: &mut ChaCha8Rng) -> Sequence {
-    let n = seq.points.len();
-    let keep = ((share * n as f64).round() as usize).clamp(2.min(n), n);
-    let mut order: Vec<usize> = (0..n).collect();
-    for i in 0..keep {
-        let j = rng.random_range(i..n);
-        order.swap(i, j);
-    }
-    order.truncate(keep);
-    order.sort_unstable();
-    subset(seq, &order)
+    seeded_rng(&format!("{seed}/{cell}/{sequence}/{draw}"))
 }
 
 /// `round(ratio * n)` more rows, every (x, y) pair uniform over the image (or, without an image
@@ -712,7 +673,7 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
                     for draw in 0..draws {
                         let mut rng = rng_for(seed, name, &seq.name, draw);
                         let (changed, what) = if keep < 1.0 {
-                            let kept = subsample(seq, keep, &mut rng);
+                            let kept = seq.subsample(keep, &mut rng);
                             (kept, format!("{} %, draw {draw}", 100.0 * keep))
                         } else {
                             let more = add_outliers(seq, outliers, &mut rng);
@@ -991,9 +952,9 @@ mod tests {
     #[test]
     fn subsampling_keeps_a_seeded_share_in_order() {
         let seq = pair();
-        let a = subsample(&seq, 0.25, &mut rng_for(1, "c", "pair", 0));
-        let b = subsample(&seq, 0.25, &mut rng_for(1, "c", "pair", 0));
-        let c = subsample(&seq, 0.25, &mut rng_for(1, "c", "pair", 1));
+        let a = seq.subsample(0.25, &mut rng_for(1, "c", "pair", 0));
+        let b = seq.subsample(0.25, &mut rng_for(1, "c", "pair", 0));
+        let c = seq.subsample(0.25, &mut rng_for(1, "c", "pair", 1));
         assert_eq!(a.points.len(), 10);
         assert_eq!(a.points, b.points);
         assert_ne!(a.points, c.points);
@@ -1008,13 +969,13 @@ mod tests {
             last = Some(j);
         }
         assert_eq!(
-            subsample(&seq, 0.5, &mut rng_for(1, "c", "pair", 0))
+            seq.subsample(0.5, &mut rng_for(1, "c", "pair", 0))
                 .points
                 .len(),
             20
         );
         assert_eq!(
-            subsample(&seq, 0.0, &mut rng_for(1, "c", "pair", 0))
+            seq.subsample(0.0, &mut rng_for(1, "c", "pair", 0))
                 .points
                 .len(),
             2
@@ -1041,7 +1002,7 @@ mod tests {
             before.labels.iter().filter(|&&l| l == 0).count() + 8
         );
         // Without outliers before, they make a group of their own.
-        let clean = subset(&seq, &(0..40).filter(|i| i % 4 != 0).collect::<Vec<_>>());
+        let clean = seq.rows(&(0..40).filter(|i| i % 4 != 0).collect::<Vec<_>>());
         assert_eq!(clean.sample().k, 2);
         assert_eq!(
             add_outliers(&clean, 0.2, &mut rng_for(2, "o", "p", 0))

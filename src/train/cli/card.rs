@@ -174,6 +174,7 @@ mod tests {
             clip_len: 5,
             clip_stride: 2,
             symmetries: vec![],
+            subsample: None,
         };
         let own = training_data("", "a, b", 3, 40, &plan, None);
         assert_eq!(

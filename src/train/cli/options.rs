@@ -9,8 +9,8 @@ use super::CliError;
 use crate::data::{DataSource, Kind, Sequence, Symmetry};
 use crate::loss::Loss;
 use crate::model::ModelConfig;
-use crate::train::cv::{Protocol, SamplePlan};
-use crate::train::{Schedule, TrainConfig};
+use crate::train::cv::{Protocol, SamplePlan, Subsample};
+use crate::train::{Schedule, TrainConfig, TrainError};
 
 /// Data selection shared by train, eval and cv.
 #[derive(Args, Debug, Clone)]
@@ -84,6 +84,14 @@ pub struct TrainArgs {
     /// rotate counts its three quarter turns).
     #[arg(long, value_enum, value_delimiter = ',')]
     pub symmetry: Vec<Symmetry>,
+    /// Add copies of every training sequence that keep a share of its rows drawn uniformly in
+    /// this range (`A-B`, or one share `A`; 0 < A <= B <= 1): training at the lower densities
+    /// users send. Seeded by --seed.
+    #[arg(long)]
+    pub subsample: Option<String>,
+    /// Subsampled copies per training sequence (with --subsample).
+    #[arg(long, default_value_t = 2)]
+    pub subsample_copies: usize,
     /// Test-time symmetries stored in the card: fits embed the input and its images under these
     /// (comma-separated: mirror, reverse, rotate) and cluster the concatenated embeddings.
     #[arg(long, value_enum, value_delimiter = ',')]
@@ -145,14 +153,51 @@ impl TrainArgs {
     /// The validated sample plan for sequences of `kind`.
     pub fn samples(&self, clip_len: usize, kind: Kind) -> Result<SamplePlan, CliError> {
         check_symmetries("--symmetry", &self.symmetry, kind)?;
+        let subsample = self.subsample()?;
         let plan = SamplePlan {
             protocol: self.protocol,
             clip_len,
             clip_stride: self.clip_stride.unwrap_or(clip_len),
             symmetries: self.symmetry.clone(),
+            subsample,
         };
         plan.validate()?;
         Ok(plan)
+    }
+
+    /// `--subsample` and `--subsample-copies`, checked; errors name the flag.
+    fn subsample(&self) -> Result<Option<Subsample>, CliError> {
+        let Some(text) = &self.subsample else {
+            return Ok(None);
+        };
+        let flag = |reason: String| CliError::Flag {
+            flag: "--subsample",
+            reason,
+        };
+        let share = |v: &str| {
+            v.trim()
+                .parse::<f64>()
+                .map_err(|_| flag(format!("{v:?} is not a number")))
+        };
+        let (low, high) = match text.split_once('-') {
+            Some((a, b)) => (share(a)?, share(b)?),
+            None => (share(text)?, share(text)?),
+        };
+        let plan = Subsample {
+            low,
+            high,
+            copies: self.subsample_copies,
+            seed: self.seed,
+        };
+        plan.validate().map_err(|e| match e {
+            TrainError::Config(reason) if self.subsample_copies == 0 => CliError::Flag {
+                flag: "--subsample-copies",
+                reason,
+            },
+            TrainError::Config(reason) => flag(reason),
+            other => flag(other.to_string()),
+        })?;
+        Ok(Some(plan))
     }
 
     /// The validated training config for rows of `input_dim` values.
