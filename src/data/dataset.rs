@@ -516,8 +516,35 @@ pub fn load_sequences(path: &Path, model_type: Option<&str>) -> Result<Vec<Seque
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// 40 correspondences of a 640 x 480 pair: 10 outliers (label 0), 30 in two structures.
+    pub(crate) fn pair() -> Sequence {
+        let rows: Vec<Vec<f64>> = (0..40)
+            .map(|i| {
+                let x = (i * 13 % 97) as f64 * 6.0;
+                let y = (i * 7 % 53) as f64 * 8.0;
+                vec![x, y, x + 3.0, y - 2.0]
+            })
+            .collect();
+        let labels: Vec<i64> = (0..40).map(|i| [0, 1, 2, 2][i % 4]).collect();
+        Sequence::from_file(
+            crate::data::SequenceFile {
+                name: "pair".into(),
+                kind: Kind::Correspondences,
+                points: rows,
+                labels,
+                num_models: Some(2),
+                image_size: Some([640.0, 480.0]),
+                source: None,
+                model_type: Some("homography".into()),
+                visible: None,
+            },
+            std::path::Path::new("pair"),
+        )
+        .unwrap()
+    }
 
     fn traj_file() -> SequenceFile {
         // 3 points, 4 frames; point 2 invisible in frame 3.

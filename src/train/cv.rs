@@ -343,3 +343,86 @@ pub fn run_in_processes(
     }
     Ok(failed)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::data::dataset::tests::pair;
+
+    fn plan(subsample: Option<Subsample>) -> SamplePlan {
+        SamplePlan {
+            protocol: Protocol::Vanilla,
+            clip_len: 5,
+            clip_stride: 5,
+            symmetries: vec![],
+            subsample,
+        }
+    }
+
+    /// Each sequence trains as itself plus its copies, each keeping a seeded share of the rows
+    /// within the range (labels following their rows); the same seed draws the same copies.
+    #[test]
+    fn subsampled_copies_keep_a_seeded_share_within_the_range() {
+        let seq = pair();
+        let sub = Subsample {
+            low: 0.25,
+            high: 0.5,
+            copies: 3,
+            seed: 7,
+        };
+        let samples = plan(Some(sub)).train_samples(&seq);
+        assert_eq!(samples.len(), 4);
+        assert_eq!(samples[0].points, seq.points);
+        for s in &samples[1..] {
+            assert!((10..=20).contains(&s.points.len()), "{}", s.points.len());
+            for i in 0..s.points.len() {
+                let row = s.points.row(i);
+                let at = (0..seq.points.len())
+                    .find(|&j| seq.points.row(j) == row)
+                    .expect("a row of the sequence");
+                assert_eq!(s.labels[i], samples[0].labels[at]);
+            }
+        }
+        assert_ne!(samples[1].points, samples[2].points);
+        let again = plan(Some(sub)).train_samples(&seq);
+        assert!(
+            again
+                .iter()
+                .zip(&samples)
+                .all(|(a, b)| a.points == b.points)
+        );
+        let other = Subsample { seed: 8, ..sub };
+        assert_ne!(
+            plan(Some(other)).train_samples(&seq)[1].points,
+            samples[1].points
+        );
+        assert_eq!(plan(None).train_samples(&seq).len(), 1);
+    }
+
+    #[test]
+    fn bad_subsampling_is_refused() {
+        let ok = Subsample {
+            low: 0.2,
+            high: 1.0,
+            copies: 1,
+            seed: 0,
+        };
+        assert!(plan(Some(ok)).validate().is_ok());
+        for bad in [
+            Subsample { low: 0.0, ..ok },
+            Subsample { high: 1.5, ..ok },
+            Subsample {
+                low: 0.6,
+                high: 0.5,
+                ..ok
+            },
+            Subsample {
+                low: f64::NAN,
+                ..ok
+            },
+            Subsample { copies: 0, ..ok },
+        ] {
+            assert!(plan(Some(bad)).validate().is_err(), "{bad:?}");
+        }
+    }
+}

@@ -34,8 +34,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use rand::rngs::ChaCha8Rng;
 use rand::RngExt;
+use rand::rngs::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::eval::{EvalRow, EvalSettings, Summary, Totals, evaluate_sample, totals};
@@ -922,32 +922,7 @@ pub fn write(report: &Report, dir: &Path) -> std::io::Result<()> {
 mod tests {
     use super::*;
 
-    fn pair() -> Sequence {
-        // 40 correspondences: 10 outliers (label 0), 30 in two structures.
-        let rows: Vec<Vec<f64>> = (0..40)
-            .map(|i| {
-                let x = (i * 13 % 97) as f64 * 6.0;
-                let y = (i * 7 % 53) as f64 * 8.0;
-                vec![x, y, x + 3.0, y - 2.0]
-            })
-            .collect();
-        let labels: Vec<i64> = (0..40).map(|i| [0, 1, 2, 2][i % 4]).collect();
-        Sequence::from_file(
-            crate::data::SequenceFile {
-                name: "pair".into(),
-                kind: Kind::Correspondences,
-                points: rows,
-                labels,
-                num_models: Some(2),
-                image_size: Some([640.0, 480.0]),
-                source: None,
-                model_type: Some("homography".into()),
-                visible: None,
-            },
-            Path::new("pair"),
-        )
-        .unwrap()
-    }
+    use crate::data::dataset::tests::pair;
 
     #[test]
     fn subsampling_keeps_a_seeded_share_in_order() {

@@ -285,6 +285,43 @@ mod tests {
     }
 
     #[test]
+    fn subsampling_flags_become_the_plan_or_name_the_flag() {
+        let f = parse(&[
+            "--subsample",
+            "0.2-0.8",
+            "--subsample-copies",
+            "3",
+            "--seed",
+            "4",
+        ]);
+        let plan = f.train.samples(5, Kind::Correspondences).unwrap();
+        let s = plan.subsample.unwrap();
+        assert_eq!((s.low, s.high, s.copies, s.seed), (0.2, 0.8, 3, 4));
+        let one = parse(&["--subsample", "0.5"]);
+        let s = one.train.samples(5, Kind::Correspondences).unwrap();
+        assert_eq!(
+            s.subsample.map(|s| (s.low, s.high, s.copies)),
+            Some((0.5, 0.5, 2))
+        );
+        for (args, flag) in [
+            (&["--subsample", "0-0.5"][..], "--subsample: "),
+            (&["--subsample", "0.5-0.2"][..], "--subsample: "),
+            (&["--subsample", "half"][..], "--subsample: "),
+            (
+                &["--subsample", "0.5", "--subsample-copies", "0"][..],
+                "--subsample-copies: ",
+            ),
+        ] {
+            let e = parse(args)
+                .train
+                .samples(5, Kind::Correspondences)
+                .unwrap_err()
+                .to_string();
+            assert!(e.starts_with(flag), "{args:?}: {e}");
+        }
+    }
+
+    #[test]
     fn bad_settings_name_their_flag() {
         let f = parse(&["--loss", "hinge"]);
         assert_eq!(
