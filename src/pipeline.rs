@@ -23,8 +23,11 @@ use std::time::Instant;
 use crate::cluster::{self, ClusterError, ClusterParams, Clustering, Points, Selection};
 use crate::data::features::with_neighbors;
 use crate::data::symmetry::closure;
-use crate::data::{ImageSize, Kind, Normalization, PointSet, Symmetry};
+use crate::data::visibility::MIN_SEEN_FRAMES;
+use crate::data::{ImageSize, Kind, Normalization, PointSet, Symmetry, Visibility};
 use crate::data::{density, frames};
+use crate::geometry::subspace::masked_subspace_distance;
+use crate::geometry::{self, Model};
 use crate::refine::{self, RefineParams, Refined, Structure};
 use crate::registry::{LoadedModel, Observed};
 
@@ -388,6 +391,117 @@ pub fn fit(
     })
 }
 
+/// [`fit`] of tracks that were not all seen in every frame ([`Visibility`]): the stages run on
+/// the tracks seen throughout, and each other track seen in at least [`MIN_SEEN_FRAMES`] frames
+/// then goes to the motion whose subspace (the refined structure's, or one fitted on the
+/// group's tracks over every frame) is nearest over the frames it was seen in
+/// ([`masked_subspace_distance`]); a track seen in fewer frames is labelled −1. The embeddings
+/// are those of the tracks seen throughout.
+pub fn fit_seen(
+    model: &LoadedModel,
+    points: &PointSet,
+    visibility: &Visibility,
+    image: Option<ImageSize>,
+    options: &FitOptions,
+) -> Result<FitOutcome, FitError> {
+    if visibility.is_complete() {
+        return fit(model, points, image, options);
+    }
+    let complete = visibility.complete();
+    let throughout = points
+        .select(&complete)
+        .map_err(|e| FitError::Input(e.to_string()))?;
+    let mut outcome = fit(model, &throughout, image, options)?;
+    let motions = motions(&throughout, &outcome);
+    let (labels, unplaced) = place(points, visibility, &complete, &outcome.labels, &motions);
+    for s in &mut outcome.structures {
+        s.inliers = labels.iter().filter(|&&l| l == s.label as i64).count();
+    }
+    if unplaced > 0 {
+        outcome.warnings.push(format!(
+            "{unplaced} tracks seen in fewer than {MIN_SEEN_FRAMES} frames (or on no motion) are labelled -1"
+        ));
+    }
+    outcome.labels = labels;
+    Ok(outcome)
+}
+
+/// The labels of every track: those of the `complete` tracks (`labels`, in their order), and
+/// for each other track seen in at least [`MIN_SEEN_FRAMES`] frames the label of the nearest
+/// of `motions` over its seen frames; −1 for the rest, counted.
+fn place(
+    points: &PointSet,
+    visibility: &Visibility,
+    complete: &[usize],
+    labels: &[i64],
+    motions: &[Motion],
+) -> (Vec<i64>, usize) {
+    let mut out = vec![-1i64; points.len()];
+    for (&i, &l) in complete.iter().zip(labels) {
+        out[i] = l;
+    }
+    let mut unplaced = 0;
+    for (i, label) in out.iter_mut().enumerate() {
+        let seen = visibility.seen(i);
+        if seen.iter().all(|&s| s) {
+            continue;
+        }
+        let nearest = (seen.iter().filter(|&&s| s).count() >= MIN_SEEN_FRAMES)
+            .then(|| {
+                motions
+                    .iter()
+                    .map(|m| {
+                        let d = masked_subspace_distance(&m.mean, &m.basis, points.row(i), seen);
+                        (m.label, d)
+                    })
+                    .filter(|(_, d)| d.is_finite())
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+            })
+            .flatten();
+        match nearest {
+            Some((l, _)) => *label = l as i64,
+            None => unplaced += 1,
+        }
+    }
+    (out, unplaced)
+}
+
+/// A label's motion: the affine subspace its tracks lie in.
+struct Motion {
+    label: usize,
+    mean: Vec<f64>,
+    basis: Vec<Vec<f64>>,
+}
+
+/// Each label's motion: the refined structure's subspace, or, without refinement, one fitted on
+/// the label's tracks over every frame.
+fn motions(points: &PointSet, outcome: &FitOutcome) -> Vec<Motion> {
+    let subspace = |label: usize, model: &Model| match model {
+        Model::Subspace { mean, basis, .. } => Some(Motion {
+            label,
+            mean: mean.clone(),
+            basis: basis.clone(),
+        }),
+        _ => None,
+    };
+    if !outcome.structures.is_empty() {
+        return outcome
+            .structures
+            .iter()
+            .filter_map(|s| subspace(s.label, &s.model))
+            .collect();
+    }
+    (0..outcome.k)
+        .filter_map(|l| {
+            let rows: Vec<&[f64]> = (0..points.len())
+                .filter(|&i| outcome.labels[i] == l as i64)
+                .map(|i| points.row(i))
+                .collect();
+            subspace(l, &geometry::fit_type("subspace", &rows)?.model)
+        })
+        .collect()
+}
+
 /// What a fit saw, for the card's validated range: the input's size, frames and image, and the
 /// answer's structure sizes and outlier share.
 fn observed(points: &PointSet, image: Option<ImageSize>, labels: &[i64], k: usize) -> Observed {
@@ -514,6 +628,111 @@ pub(crate) mod tests {
             .unwrap();
         assert_eq!(fit.embed_dim, 3);
         assert_eq!(fit.embeddings.len(), 3 * 3);
+    }
+
+    /// 12 tracks over 4 frames, 6 of each of two motions (turning at different rates and
+    /// drifting apart), then a track of each seen in frames 0, 1 and 3 only (garbage in frame
+    /// 2) and one seen in frames 0 and 3: rows and visibility.
+    fn partly_seen_tracks() -> (PointSet, Visibility) {
+        let track = |x: f64, y: f64, m: usize| -> Vec<f64> {
+            (0..4)
+                .flat_map(|f| {
+                    let a = f as f64 * [0.05, -0.2][m];
+                    let (s, c) = a.sin_cos();
+                    let t = f as f64 * [3.0, -2.0][m];
+                    [c * x - s * y + t + 32.0, s * x + c * y - t + 32.0]
+                })
+                .collect()
+        };
+        let mut rows: Vec<Vec<f64>> = (0..12)
+            .map(|i| track((i * 7 % 11) as f64 - 5.0, (i * 5 % 13) as f64 - 6.0, i / 6))
+            .collect();
+        for (m, x) in [(0, 4.5), (1, -2.5)] {
+            let mut t = track(x, 3.0, m);
+            t[4] = 900.0;
+            t[5] = -900.0;
+            rows.push(t);
+        }
+        rows.push(track(1.0, 1.0, 0));
+        let mut seen = vec![vec![1u8; 4]; 12];
+        seen.extend([vec![1, 1, 0, 1], vec![1, 1, 0, 1], vec![1, 0, 0, 1]]);
+        let points = PointSet::from_rows(Kind::Trajectories, &rows).unwrap();
+        (points, Visibility::new(&seen, 15, 4).unwrap())
+    }
+
+    /// A partly seen track goes to the motion nearest over its seen frames; one seen in too few
+    /// frames stays −1.
+    #[test]
+    fn partly_seen_tracks_go_to_the_motion_of_their_seen_frames() {
+        let (points, visibility) = partly_seen_tracks();
+        let complete = visibility.complete();
+        let truth: Vec<i64> = (0..12).map(|i| (i / 6) as i64).collect();
+        let motions: Vec<Motion> = (0..2)
+            .map(|m| {
+                let rows: Vec<&[f64]> = (6 * m..6 * m + 6).map(|i| points.row(i)).collect();
+                match geometry::fit_type("subspace", &rows).unwrap().model {
+                    Model::Subspace { mean, basis, .. } => Motion {
+                        label: m,
+                        mean,
+                        basis,
+                    },
+                    other => panic!("{other:?}"),
+                }
+            })
+            .collect();
+        let (labels, unplaced) = place(&points, &visibility, &complete, &truth, &motions);
+        assert_eq!(&labels[..12], &truth[..]);
+        assert_eq!(&labels[12..], &[0, 1, -1]);
+        assert_eq!(unplaced, 1);
+    }
+
+    /// Through the pipeline: the tracks seen throughout are fitted alone (the same labels as
+    /// fitting them by themselves), the others take a structure's label or −1 with a warning,
+    /// and the structures count every track labelled with them.
+    #[test]
+    fn fits_of_partly_seen_tracks_fit_the_tracks_seen_throughout() {
+        let model = tiny(vec![]);
+        let (points, visibility) = partly_seen_tracks();
+        let params = ClusterParams::builder()
+            .selection(Selection::Fixed(2))
+            .seed(1)
+            .build()
+            .unwrap();
+        let options = FitOptions {
+            params: &params,
+            symmetries: &[],
+            refine: Some(RefineParams {
+                outliers: false,
+                ..RefineParams::default()
+            }),
+        };
+        let image = Some(ImageSize::new(64.0, 64.0).unwrap());
+        let out = fit_seen(&model, &points, &visibility, image, &options).unwrap();
+        let throughout = points.select(&visibility.complete()).unwrap();
+        let alone = fit(&model, &throughout, image, &options).unwrap();
+        assert_eq!(out.labels.len(), 15);
+        assert_eq!(&out.labels[..12], &alone.labels[..]);
+        assert!(
+            out.labels[12..14]
+                .iter()
+                .all(|&l| (0..out.k as i64).contains(&l))
+        );
+        assert_eq!(out.labels[14], -1);
+        assert!(
+            out.warnings
+                .iter()
+                .any(|w| w.starts_with("1 tracks seen in fewer than 3")),
+            "{:?}",
+            out.warnings
+        );
+        for s in &out.structures {
+            let n = out.labels.iter().filter(|&&l| l == s.label as i64).count();
+            assert_eq!(s.inliers, n);
+        }
+        // Every track seen throughout: the plain fit.
+        let all = Visibility::new(&vec![vec![1u8; 4]; 12], 12, 4).unwrap();
+        let plain = fit_seen(&model, &throughout, &all, image, &options).unwrap();
+        assert_eq!(plain.labels, alone.labels);
     }
 
     #[test]

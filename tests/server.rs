@@ -118,6 +118,59 @@ fn tracks_of_every_length_are_fitted_with_structures_on_every_frame() {
     }
 }
 
+/// A whole KT3DMoSeg sequence, every track sent with the frames it was seen in: the tracks
+/// seen throughout are fitted as if sent alone, the others are placed on their motions, and a
+/// track seen in fewer than 3 frames is -1.
+#[test]
+fn tracks_seen_in_some_frames_are_placed_on_the_motions() {
+    let server = Server::start(&[]);
+    let file = dataset("kt3dmoseg/Seq013_Clip02.json");
+    let visible = file["visible"].clone();
+    let seen: Vec<usize> = visible
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_array().unwrap().iter().filter(|x| *x == 1).count())
+        .collect();
+    let frames = file["num_frames"].as_u64().unwrap() as usize;
+    let complete: Vec<usize> = (0..seen.len()).filter(|&i| seen[i] == frames).collect();
+    assert!(complete.len() > 100 && complete.len() < seen.len() / 2);
+    let k = json!(file["num_models"]);
+    let body = fit_body(&file, json!({"visible": visible, "k": k}));
+    let r = server.post_json("/v1/fit", &body);
+    assert_eq!(r.status, 200, "{}", r.text());
+    let v = r.json();
+    let all = labels(&v);
+    assert_eq!(all.len(), seen.len());
+    // Alone: the tracks seen throughout.
+    let rows: Vec<Value> = complete
+        .iter()
+        .map(|&i| file["points"][i].clone())
+        .collect();
+    let alone = server.post_json(
+        "/v1/fit",
+        &json!({"kind": "trajectories", "points": rows, "image_size": file["image_size"], "k": k}),
+    );
+    assert_eq!(alone.status, 200);
+    let alone = labels(&alone.json());
+    assert!(complete.iter().zip(&alone).all(|(&i, &l)| all[i] == l));
+    let k = v["k"].as_u64().unwrap() as usize;
+    let few = (0..seen.len()).filter(|&i| seen[i] < 3).count();
+    assert_eq!(
+        all.iter().filter(|&&l| l == k).count(),
+        few,
+        "-1 reads as k"
+    );
+    // Placed tracks follow their motions (this sequence is clean: well within 5 %).
+    let truth = truth(&file);
+    let placed: Vec<usize> = (0..seen.len())
+        .filter(|&i| (3..frames).contains(&seen[i]))
+        .collect();
+    let t: Vec<usize> = placed.iter().map(|&i| truth[i]).collect();
+    let p: Vec<usize> = placed.iter().map(|&i| all[i]).collect();
+    assert!(error_rate(&t, &p) < 0.05, "{}", error_rate(&t, &p));
+}
+
 #[test]
 fn fits_a_real_kt3dmoseg_sequence() {
     let server = Server::start(&[]);

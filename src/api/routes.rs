@@ -283,7 +283,12 @@ async fn run_fit(state: &AppState, job: FitJob) -> Result<FitResponse, ApiError>
                 symmetries,
                 refine: job.refine,
             };
-            let outcome = pipeline::fit(&job.model, &job.points, job.image_size, &options);
+            let outcome = match &job.visibility {
+                Some(seen) => {
+                    pipeline::fit_seen(&job.model, &job.points, seen, job.image_size, &options)
+                }
+                None => pipeline::fit(&job.model, &job.points, job.image_size, &options),
+            };
             (job, outcome)
         });
         let (job, outcome) = handle
@@ -328,7 +333,14 @@ async fn fit(
     let ApiJson(request) = body?;
     let job = request.validate(state.models()?, &state.limits)?;
     // The picture needs the points, which the fit consumes with the job.
-    let drawn = picture::wants_svg(&headers).then(|| (job.points.clone(), job.image_size));
+    // Tracks not seen in every frame are drawn resting where they were seen.
+    let drawn = picture::wants_svg(&headers).then(|| {
+        let points = match &job.visibility {
+            Some(seen) => seen.held(&job.points),
+            None => job.points.clone(),
+        };
+        (points, job.image_size)
+    });
     let fitted = run_fit(&state, job).await?;
     let Some((points, image_size)) = drawn else {
         return Ok(([(header::VARY, "accept")], Json(fitted)).into_response());

@@ -325,6 +325,43 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
             E::InvalidRequest,
         ),
         (
+            "visible for points2d",
+            json!({"kind": "points2d", "points": two, "visible": [[1], [1]]}),
+            E::InvalidRequest,
+        ),
+        (
+            "visible flags not 0/1 numbers",
+            json!({"kind": "trajectories", "points": tracks(), "visible": vec![[true, true]; 8]}),
+            E::InvalidRequest,
+        ),
+        (
+            "visible rows for other tracks",
+            json!({"kind": "trajectories", "points": tracks(), "visible": vec![[1, 1]; 7]}),
+            E::InvalidPoints,
+        ),
+        (
+            "visible row of other frames",
+            json!({"kind": "trajectories", "points": tracks(), "visible": vec![vec![1, 1, 1]; 8]}),
+            E::InvalidPoints,
+        ),
+        (
+            "visible flag 2",
+            json!({"kind": "trajectories", "points": tracks(), "visible": vec![[1, 2]; 8]}),
+            E::InvalidPoints,
+        ),
+        (
+            "one track seen throughout",
+            json!({"kind": "trajectories", "points": tracks(),
+                   "visible": [[1, 1], [0, 1], [1, 0], [0, 1], [1, 0], [0, 1], [1, 0], [0, 1]]}),
+            E::InvalidPoints,
+        ),
+        (
+            "embeddings of partly seen tracks",
+            json!({"kind": "trajectories", "points": tracks(), "return_embeddings": true,
+                   "visible": [[1, 1], [1, 1], [1, 1], [0, 1], [1, 1], [1, 1], [1, 1], [1, 1]]}),
+            E::InvalidRequest,
+        ),
+        (
             "unknown kind",
             json!({"kind": "voxels", "points": two}),
             E::UnknownKind,

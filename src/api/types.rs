@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use super::error::{ApiError, ErrorCode};
 use crate::cluster::{ClusterParams, Clustering, Selection};
-use crate::data::{ImageSize, Kind, PointSet};
+use crate::data::{ImageSize, Kind, PointSet, Visibility};
 use crate::geometry::Model;
 use crate::pipeline::FitOutcome;
 use crate::refine::RefineParams;
@@ -57,6 +57,10 @@ pub struct FitRequest {
     /// A fixed outlier threshold in the caller's units instead of the estimated one.
     #[serde(default)]
     pub outlier_threshold: Option<f64>,
+    /// Trajectories: N x F flags, 1 where track i was seen in frame f, 0 where it was not (its
+    /// values there are ignored).
+    #[serde(default)]
+    pub visible: Option<Vec<Vec<u8>>>,
 }
 
 /// `POST /v1/fit/batch` body as sent; entries are parsed one by one so that a bad entry gets
@@ -79,6 +83,8 @@ pub struct FitJob {
     pub test_symmetries: bool,
     /// Geometric refinement, or `None` for the learned clustering alone.
     pub refine: Option<RefineParams>,
+    /// Which frames each track was seen in, when the request said (trajectories).
+    pub visibility: Option<Visibility>,
 }
 
 /// The shipped model used for a kind when the request names none: the first (by name) whose
@@ -235,6 +241,27 @@ impl FitRequest {
                 })
             }
         };
+        let return_embeddings = self.return_embeddings.unwrap_or(false);
+        let visibility = match self.visible {
+            None => None,
+            Some(_) if kind != Kind::Trajectories => {
+                return Err(ApiError::new(
+                    ErrorCode::InvalidRequest,
+                    "visible is only for kind trajectories",
+                ));
+            }
+            Some(rows) => {
+                let v = Visibility::new(&rows, n, points.dim() / 2)?;
+                if return_embeddings && !v.is_complete() {
+                    return Err(ApiError::new(
+                        ErrorCode::InvalidRequest,
+                        "return_embeddings needs every track seen in every frame: only those \
+                         are embedded",
+                    ));
+                }
+                Some(v)
+            }
+        };
         let params = ClusterParams::builder()
             .k_max(k_max)
             .selection(selection)
@@ -245,9 +272,10 @@ impl FitRequest {
             points,
             image_size,
             params,
-            return_embeddings: self.return_embeddings.unwrap_or(false),
+            return_embeddings,
             test_symmetries: self.test_symmetries.unwrap_or(true),
             refine,
+            visibility,
         })
     }
 }

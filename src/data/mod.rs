@@ -10,9 +10,11 @@ pub mod ranges;
 pub mod symmetry;
 pub mod synthetic;
 pub mod twoview;
+pub mod visibility;
 
 pub use dataset::{
     DataError, DataSource, Sample, Sequence, SequenceFile, SpecError, load_sequences, seeded_rng,
 };
 pub use points::{ImageSize, InputError, Kind, MIN_POINTS, Normalization, PointSet};
 pub use symmetry::{Symmetry, with_symmetries};
+pub use visibility::Visibility;

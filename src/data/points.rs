@@ -92,6 +92,21 @@ pub enum InputError {
     BadTrajectoryMatrix { rows: usize },
     #[error("image_size must be two numbers of pixels between 1 and 1e9, got [{w}, {h}]")]
     BadImageSize { w: f64, h: f64 },
+    #[error("visible has {rows} rows for {tracks} tracks: one row of 0/1 flags per track")]
+    VisibleRows { rows: usize, tracks: usize },
+    #[error("visible row {row} has {found} flags for {frames} frames")]
+    VisibleWidth {
+        row: usize,
+        found: usize,
+        frames: usize,
+    },
+    #[error("visible row {row}, frame {frame} is {value}: flags are 0 (not seen) or 1 (seen)")]
+    VisibleValue { row: usize, frame: usize, value: u8 },
+    #[error(
+        "only {complete} tracks are seen in every frame; a fit needs at least 2 (the others are \
+         placed on the motions those tracks give)"
+    )]
+    TooFewSeenThroughout { complete: usize },
 }
 
 /// Width and height of the image the pixel coordinates refer to.

@@ -25,7 +25,7 @@
 
 use std::marker::PhantomData;
 
-use super::linalg::{median, sym_eigen, top_eigen};
+use super::linalg::{median, solve, sym_eigen, top_eigen};
 use super::robust::{Estimator, Robust, SIGMA_FLOOR, evaluate, fit_robust};
 use super::{GeometryError, Model};
 
@@ -37,6 +37,60 @@ pub const MAX_RANK: usize = 4;
 /// The affine rank of one rigid motion under an affine camera: the rank of the robust fit
 /// before the inliers may raise it.
 pub const RIGID_RANK: usize = 3;
+
+/// [`subspace_distance`] over the frames a track was seen in (`seen`, one flag per frame):
+/// the distance of the seen coordinates to the subspace restricted to them, the track's
+/// coefficients on the basis fitted by least squares on those coordinates alone, divided by
+/// √(frames seen). INFINITY when the lengths disagree or the seen frames do not determine the
+/// coefficients (fewer seen coordinates than basis rows, or a restricted basis without full
+/// rank).
+pub fn masked_subspace_distance(
+    mean: &[f64],
+    basis: &[Vec<f64>],
+    row: &[f64],
+    seen: &[bool],
+) -> f64 {
+    let d = mean.len();
+    let r = basis.len();
+    if row.len() != d || 2 * seen.len() != d || basis.iter().any(|b| b.len() != d) {
+        return f64::INFINITY;
+    }
+    let coords: Vec<usize> = (0..d).filter(|&c| seen[c / 2]).collect();
+    if coords.len() <= r {
+        return f64::INFINITY;
+    }
+    // Normal equations G a = B_V y of the coefficients a, y = (row - mean) on the seen
+    // coordinates V; G = B_V B_Vᵀ (r × r).
+    let y: Vec<f64> = coords.iter().map(|&c| row[c] - mean[c]).collect();
+    let mut g = vec![0.0; r * r];
+    let mut b = vec![0.0; r];
+    for i in 0..r {
+        for j in i..r {
+            let v: f64 = coords.iter().map(|&c| basis[i][c] * basis[j][c]).sum();
+            g[i * r + j] = v;
+            g[j * r + i] = v;
+        }
+        b[i] = coords.iter().zip(&y).map(|(&c, v)| basis[i][c] * v).sum();
+    }
+    let a = if r == 0 {
+        Vec::new()
+    } else if let Some(a) = solve(&g, &b, r) {
+        a
+    } else {
+        return f64::INFINITY;
+    };
+    let e2: f64 = coords
+        .iter()
+        .zip(&y)
+        .map(|(&c, v)| {
+            let fitted: f64 = (0..r).map(|i| a[i] * basis[i][c]).sum();
+            (v - fitted).powi(2)
+        })
+        .sum();
+    let frames = coords.len() as f64 / 2.0;
+    let out = (e2 / frames).sqrt();
+    if out.is_finite() { out } else { f64::INFINITY }
+}
 
 /// An affine subspace: mean and orthonormal basis rows (length 2F each).
 #[derive(Debug, Clone, PartialEq)]
@@ -498,6 +552,54 @@ mod tests {
             }
             m => panic!("{m:?}"),
         }
+    }
+
+    /// Over the frames a track was seen in, a track of the subspace is on it whatever its
+    /// other values; a track off it is not; too few seen coordinates give INFINITY, never NaN.
+    #[test]
+    fn masked_distance_reads_only_the_seen_frames() {
+        // Rank 2 in 8 coordinates (4 frames): x moves by u, y by w, frame to frame.
+        let mean = vec![1.0, 2.0, 1.0, 2.0, 1.0, 2.0, 1.0, 2.0];
+        let s = 0.5;
+        let basis = [
+            vec![0.0, 0.0, s, 0.0, 2.0 * s, 0.0, 3.0 * s, 0.0],
+            vec![0.0, 0.0, 0.0, s, 0.0, 2.0 * s, 0.0, 3.0 * s],
+        ];
+        let norm = |b: &Vec<f64>| b.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let basis: Vec<Vec<f64>> = basis
+            .iter()
+            .map(|b| b.iter().map(|v| v / norm(b)).collect())
+            .collect();
+        let on = [1.0, 2.0, 3.0, 1.0, 5.0, 0.0, 7.0, -1.0];
+        let seen = [true, true, true, true];
+        assert!(subspace_distance(&mean, &basis, &on) < 1e-12);
+        assert!(masked_subspace_distance(&mean, &basis, &on, &seen) < 1e-12);
+        // Frame 2 unseen, garbage there: still on it.
+        let mut hidden = on;
+        hidden[4] = 1e6;
+        hidden[5] = -3e5;
+        let partly = [true, true, false, true];
+        assert!(masked_subspace_distance(&mean, &basis, &hidden, &partly) < 1e-9);
+        assert!(subspace_distance(&mean, &basis, &hidden) > 1e3);
+        // Off it in a seen frame.
+        let mut off = on;
+        off[6] += 4.0;
+        let d = masked_subspace_distance(&mean, &basis, &off, &partly);
+        assert!(d > 0.1 && d.is_finite(), "{d}");
+        // One seen frame: 2 coordinates for 2 coefficients determine nothing.
+        assert_eq!(
+            masked_subspace_distance(&mean, &basis, &on, &[true, false, false, false]),
+            f64::INFINITY
+        );
+        // Wrong lengths.
+        assert_eq!(
+            masked_subspace_distance(&mean, &basis, &on[..6], &partly),
+            f64::INFINITY
+        );
+        assert_eq!(
+            masked_subspace_distance(&mean, &basis, &on, &[true, true]),
+            f64::INFINITY
+        );
     }
 
     #[test]

@@ -1,0 +1,162 @@
+//! Which frames of each track were seen: the `visible` mask a trajectory request may carry.
+//!
+//! Trackers lose features and find new ones, so real tracks start and end at different frames.
+//! A request sends every track over all F frames (any finite numbers where a track was not
+//! seen) and an N × F mask of 0 and 1. The fit runs on the tracks seen in every frame
+//! ([`Visibility::complete`]); each other track seen in at least [`MIN_SEEN_FRAMES`] frames then
+//! goes to the motion whose subspace explains its seen frames best
+//! ([`crate::pipeline::fit`]); a track seen in fewer frames is labelled −1.
+
+use super::points::{InputError, PointSet};
+
+/// The fewest frames a partly seen track needs to be placed: 6 coordinates, more than the
+/// largest subspace rank (4) fits exactly.
+pub const MIN_SEEN_FRAMES: usize = 3;
+
+/// A validated N × F mask: `seen[i][f]` whether track i was seen in frame f.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Visibility {
+    seen: Vec<Vec<bool>>,
+}
+
+impl Visibility {
+    /// `rows`: one row per track of `frames` flags, each 0 or 1, for `tracks` tracks. At least
+    /// 2 tracks must be seen in every frame (what a fit needs).
+    pub fn new(rows: &[Vec<u8>], tracks: usize, frames: usize) -> Result<Self, InputError> {
+        if rows.len() != tracks {
+            return Err(InputError::VisibleRows {
+                rows: rows.len(),
+                tracks,
+            });
+        }
+        let mut seen = Vec::with_capacity(tracks);
+        for (row, flags) in rows.iter().enumerate() {
+            if flags.len() != frames {
+                return Err(InputError::VisibleWidth {
+                    row,
+                    found: flags.len(),
+                    frames,
+                });
+            }
+            if let Some(frame) = flags.iter().position(|&v| v > 1) {
+                return Err(InputError::VisibleValue {
+                    row,
+                    frame,
+                    value: flags[frame],
+                });
+            }
+            seen.push(flags.iter().map(|&v| v == 1).collect::<Vec<bool>>());
+        }
+        let visibility = Self { seen };
+        let complete = visibility.complete().len();
+        if complete < super::MIN_POINTS {
+            return Err(InputError::TooFewSeenThroughout { complete });
+        }
+        Ok(visibility)
+    }
+
+    /// The tracks seen in every frame, ascending.
+    pub fn complete(&self) -> Vec<usize> {
+        (0..self.seen.len())
+            .filter(|&i| self.seen[i].iter().all(|&s| s))
+            .collect()
+    }
+
+    /// Whether every track was seen in every frame.
+    pub fn is_complete(&self) -> bool {
+        self.seen.iter().all(|row| row.iter().all(|&s| s))
+    }
+
+    /// The frames track `i` was seen in.
+    pub fn seen(&self, i: usize) -> &[bool] {
+        &self.seen[i]
+    }
+
+    /// `points` (trajectories of this mask's tracks and frames) with each unseen position of a
+    /// track replaced by its position in the nearest seen frame (the earlier on a tie), for
+    /// drawing: a track then rests where it was last (or first) seen. A track seen in no frame
+    /// keeps its values.
+    pub fn held(&self, points: &PointSet) -> PointSet {
+        let values = (0..points.len())
+            .flat_map(|i| {
+                let row = points.row(i);
+                let seen = &self.seen[i];
+                (0..seen.len()).flat_map(move |f| {
+                    let source = (0..seen.len())
+                        .filter(|&g| seen[g])
+                        .min_by_key(|&g| (g.abs_diff(f), g))
+                        .unwrap_or(f);
+                    [row[2 * source], row[2 * source + 1]]
+                })
+            })
+            .collect();
+        PointSet::from_flat(points.kind(), points.dim(), values).unwrap_or_else(|_| points.clone())
+    }
+
+    /// Tracks in the mask.
+    pub fn len(&self) -> usize {
+        self.seen.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.seen.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn complete_tracks_are_those_seen_in_every_frame() {
+        let v = Visibility::new(
+            &[vec![1, 1, 1], vec![0, 1, 1], vec![1, 1, 1], vec![1, 0, 0]],
+            4,
+            3,
+        )
+        .unwrap();
+        assert_eq!(v.complete(), vec![0, 2]);
+        assert!(!v.is_complete());
+        assert_eq!(v.seen(1), &[false, true, true]);
+        let all = Visibility::new(&[vec![1, 1], vec![1, 1]], 2, 2).unwrap();
+        assert!(all.is_complete());
+    }
+
+    #[test]
+    fn unseen_positions_are_held_at_the_nearest_seen_frame_for_drawing() {
+        let points = PointSet::from_rows(
+            super::super::Kind::Trajectories,
+            &[
+                vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+                vec![0.0, 0.0, 7.0, 8.0, 0.0, 0.0],
+                vec![9.0, 9.0, 9.0, 9.0, 9.0, 9.0],
+            ],
+        )
+        .unwrap();
+        let v = Visibility::new(&[vec![1, 1, 1], vec![0, 1, 0], vec![1, 1, 1]], 3, 3).unwrap();
+        let held = v.held(&points);
+        assert_eq!(held.row(0), points.row(0));
+        assert_eq!(held.row(1), &[7.0, 8.0, 7.0, 8.0, 7.0, 8.0]);
+    }
+
+    #[test]
+    fn masks_of_the_wrong_shape_or_values_are_refused_with_the_place() {
+        let e = |rows: &[Vec<u8>], n, f| Visibility::new(rows, n, f).unwrap_err().to_string();
+        assert_eq!(
+            e(&[vec![1, 1]], 2, 2),
+            "visible has 1 rows for 2 tracks: one row of 0/1 flags per track"
+        );
+        assert_eq!(
+            e(&[vec![1, 1], vec![1]], 2, 2),
+            "visible row 1 has 1 flags for 2 frames"
+        );
+        assert_eq!(
+            e(&[vec![1, 1], vec![1, 2]], 2, 2),
+            "visible row 1, frame 1 is 2: flags are 0 (not seen) or 1 (seen)"
+        );
+        assert!(
+            e(&[vec![1, 1], vec![0, 1], vec![1, 0]], 3, 2)
+                .starts_with("only 1 tracks are seen in every frame")
+        );
+    }
+}
