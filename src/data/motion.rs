@@ -67,6 +67,15 @@
 //! inlier tracks and frames of the per-frame displacement, so outliers move as much as real
 //! tracks), reflected at the image borders to stay inside.
 //!
+//! **Dropout.** With `--dropout` (a range in `[0, 1)`, default 0: KT3DMoSeg's clips as
+//! evaluated hold the tracks seen throughout), a share φ of the tracks (uniform per sample in
+//! the range; every row but the first two after shuffling, outliers included, independently) is
+//! seen only in a run of L consecutive frames, L uniform in 2..F and its start uniform; at least
+//! two tracks are seen throughout, and clips of 2 frames have no dropout. The positions outside
+//! the run stay in the rows; the file's `visible` mask (N x F, 1 seen) says which were seen
+//! ([`crate::data::Visibility`]). Without dropout nothing is drawn for it, so every other setting
+//! gives the samples it gave before.
+//!
 //! **Labels**, as the dataset format has them ([`crate::data::dataset`]): in files, raw label 0
 //! is the outlier group (AdelaideRMF's convention; KT3DMoSeg itself has no outliers), the
 //! background 1 and the objects 2..=K. In the [`Sample`], as loading such a file gives: without
@@ -76,8 +85,8 @@
 //! kind `trajectories`), `image_size` is set, every value lies in the image.
 //!
 //! **Spec.** `--data motion:[count=N][,seed=S][,frames=A-B][,motions=A-B][,points=A-B]
-//! [,noise=A-B][,outliers=A-B][,motion-scale=A-B][,focal=A-B][,width=A-B][,height=A-B]`
-//! generates in memory ([`MotionSpec`]; defaults: 200 samples, seed 0, [`MotionParams::default`]);
+//! [,noise=A-B][,outliers=A-B][,motion-scale=A-B][,focal=A-B][,width=A-B][,height=A-B]
+//! [,dropout=A-B]` generates in memory ([`MotionSpec`]; defaults: 200 samples, seed 0, [`MotionParams::default`]);
 //! one value `A` is the range `A-A`.
 
 use rand::rngs::ChaCha8Rng;
@@ -146,6 +155,8 @@ pub struct MotionParams {
     pub width: [f64; 2],
     /// Image height, px (`--height`, 64 to 1e5).
     pub height: [f64; 2],
+    /// Fraction of the tracks seen in only part of the clip (`--dropout`, in `[0, 1)`).
+    pub dropout: [f64; 2],
 }
 
 impl Default for MotionParams {
@@ -160,6 +171,7 @@ impl Default for MotionParams {
             focal: [300.0, 1500.0],
             width: [640.0, 1920.0],
             height: [360.0, 1080.0],
+            dropout: [0.0, 0.0],
         }
     }
 }
@@ -211,6 +223,12 @@ impl MotionParams {
             self.outliers,
             (0.0, 1.0, true),
             "the outlier fraction",
+        )?;
+        check_range(
+            "--dropout",
+            self.dropout,
+            (0.0, 1.0, true),
+            "the fraction of partly seen tracks",
         )?;
         let scale = self.motion_scale;
         if !(scale[0] > 0.0 && scale[1] > 0.0) {
@@ -390,6 +408,9 @@ pub struct MotionSample {
     pub frames: usize,
     /// Gross outlier tracks (0 without them).
     pub outliers: usize,
+    /// With dropout, per track the frames it was seen in (1) or not (0); `None`: every track
+    /// in every frame.
+    pub visible: Option<Vec<Vec<u8>>>,
     pub truth: MotionTruth,
 }
 
@@ -609,7 +630,10 @@ impl MotionGenerator {
         let points =
             PointSet::from_flat(Kind::Trajectories, 2 * frames, values).expect("finite, in image");
         let motions = setup.counts.len();
+        let range = self.params.dropout;
+        let visible = (range[1] > 0.0).then(|| dropout(rng, range, points.len(), frames));
         MotionSample {
+            visible,
             sample: Sample {
                 name: name.to_string(),
                 points,
@@ -626,6 +650,26 @@ impl MotionGenerator {
     }
 }
 
+/// Which frames each of `tracks` tracks is seen in: a share φ (uniform in `range`) of them, in
+/// input order, is seen only in a run of L consecutive frames (L uniform in 2..frames, its start
+/// uniform), the others in every frame; at least 2 tracks are seen throughout, and with 2
+/// frames every track is.
+fn dropout(rng: &mut ChaCha8Rng, range: [f64; 2], tracks: usize, frames: usize) -> Vec<Vec<u8>> {
+    let phi = uniform(rng, range);
+    let mut seen = vec![vec![1u8; frames]; tracks];
+    for row in seen.iter_mut().skip(2) {
+        if frames < 3 || rng.random::<f64>() >= phi {
+            continue;
+        }
+        let len = rng.random_range(2..frames);
+        let start = rng.random_range(0..=frames - len);
+        for (f, v) in row.iter_mut().enumerate() {
+            *v = u8::from((start..start + len).contains(&f));
+        }
+    }
+    seen
+}
+
 /// `x` reflected at 0 and `len` into `[0, len)`.
 fn reflect(x: f64, len: f64) -> f64 {
     let y = x.rem_euclid(2.0 * len);
@@ -635,7 +679,7 @@ fn reflect(x: f64, len: f64) -> f64 {
 
 impl MotionSample {
     /// The sample in the on-disk dataset format (kind `trajectories`; outliers raw label 0, the
-    /// background 1, objects 2..=K; every track visible in every frame).
+    /// background 1, objects 2..=K; with dropout, the `visible` mask).
     pub fn to_file(&self, seed: u64) -> SequenceFile {
         let s = &self.sample;
         let t = &self.truth;
@@ -657,6 +701,10 @@ impl MotionSample {
                 self.outliers
             );
         }
+        if let Some(v) = &self.visible {
+            let partly = v.iter().filter(|row| row.contains(&0)).count();
+            source += &format!("; {partly} tracks seen in only part of the clip (visible)");
+        }
         SequenceFile {
             name: s.name.clone(),
             kind: Kind::Trajectories,
@@ -668,7 +716,7 @@ impl MotionSample {
             image_size: Some([t.image.width, t.image.height]),
             source: Some(source),
             model_type: None,
-            visible: None,
+            visible: self.visible.clone(),
         }
     }
 }
@@ -740,7 +788,11 @@ impl std::fmt::Display for MotionSpec {
             range_text(p.focal),
             range_text(p.width),
             range_text(p.height)
-        )
+        )?;
+        if p.dropout != [0.0, 0.0] {
+            write!(f, ",dropout={}", range_text(p.dropout))?;
+        }
+        Ok(())
     }
 }
 
@@ -770,11 +822,12 @@ impl std::str::FromStr for MotionSpec {
                 "focal" => p.focal = setting.pair()?,
                 "width" => p.width = setting.pair()?,
                 "height" => p.height = setting.pair()?,
+                "dropout" => p.dropout = setting.pair()?,
                 _ => {
                     return Err(SpecError::UnknownSetting {
                         generator: "motion",
                         key: setting.key.to_string(),
-                        known: "count, seed, frames, motions, points, noise, outliers, motion-scale, focal, width, height",
+                        known: "count, seed, frames, motions, points, noise, outliers, motion-scale, focal, width, height, dropout",
                     });
                 }
             }
@@ -1189,6 +1242,43 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    /// Dropout: a share of the tracks seen in one run of 2 or more consecutive frames, at least
+    /// two seen throughout, the rows as without it; no dropout draws nothing (the same samples
+    /// as before it existed), and the spec prints it only when set.
+    #[test]
+    fn dropout_hides_runs_of_frames_and_leaves_the_rest_as_it_was() {
+        let plain: MotionSpec = "count=4,seed=9,frames=12,motions=2-3,points=20-30"
+            .parse()
+            .unwrap();
+        let spec: MotionSpec = "count=4,seed=9,frames=12,motions=2-3,points=20-30,dropout=0.5"
+            .parse()
+            .unwrap();
+        assert!(!plain.to_string().contains("dropout"));
+        assert!(spec.to_string().ends_with(",dropout=0.5"));
+        let text = spec.to_string();
+        assert_eq!(text["motion:".len()..].parse::<MotionSpec>().unwrap(), spec);
+        let a: Vec<SequenceFile> = plain.files().unwrap().collect();
+        let b: Vec<SequenceFile> = spec.files().unwrap().collect();
+        // The first sample is drawn before any dropout: its rows are the same.
+        assert_eq!(a[0].points, b[0].points);
+        assert!(a.iter().all(|f| f.visible.is_none()));
+        for f in &b {
+            let v = f.visible.as_ref().unwrap();
+            assert_eq!(v.len(), f.points.len());
+            assert!(v.iter().filter(|r| r.iter().all(|&x| x == 1)).count() >= 2);
+            let partly: Vec<&Vec<u8>> = v.iter().filter(|r| r.contains(&0)).collect();
+            let share = partly.len() as f64 / v.len() as f64;
+            assert!((0.3..0.7).contains(&share), "{share}");
+            for r in partly {
+                let on: Vec<usize> = (0..12).filter(|&t| r[t] == 1).collect();
+                assert!(on.len() >= 2 && on.len() < 12);
+                assert_eq!(on.last().unwrap() - on[0] + 1, on.len(), "one run: {r:?}");
+            }
+        }
+        let bad = "dropout=1".parse::<MotionSpec>().unwrap_err().to_string();
+        assert!(bad.starts_with("dropout=1"), "{bad}");
     }
 
     #[test]

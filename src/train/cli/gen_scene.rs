@@ -51,6 +51,10 @@ pub struct GenMotionJob {
     /// Image height in pixels [default: 360-1080].
     #[arg(long)]
     pub height: Option<String>,
+    /// Share of the tracks seen in only part of the clip (a run of 2 or more consecutive
+    /// frames), written as each file's `visible` mask, in [0, 1) [default: 0].
+    #[arg(long)]
+    pub dropout: Option<String>,
 }
 
 /// The flags of `gen-twoview`; unset ranges keep [`TwoViewParams::new`]'s for the mode.
@@ -138,6 +142,7 @@ impl GenMotionJob {
             )?,
             focal: range("--focal", self.focal.as_deref(), d.focal)?,
             width: range("--width", self.width.as_deref(), d.width)?,
+            dropout: range("--dropout", self.dropout.as_deref(), d.dropout)?,
             height: range("--height", self.height.as_deref(), d.height)?,
         };
         params.validate()?;

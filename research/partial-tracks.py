@@ -1,11 +1,14 @@
-"""KT3DMoSeg, every track of each sequence with its visibility, fitted by the fold model that never
-saw the sequence (known K, refined, outliers off): error on the tracks seen throughout, on the
-placed partly seen tracks, and the share of tracks labelled. Needs a server on the fold models:
-  ./target/release/multifit-server --addr 127.0.0.1:8934 --models runs/cv/kt-pretrained/models
-  python3 research/kt3dmoseg-partial-tracks.py 8934"""
+"""Trajectory sequences sent whole with their `visible` masks (known K, refined, outliers off):
+the error on the tracks seen throughout, on the partly seen tracks placed on their motions, and
+the share of tracks labelled. Needs a running server.
+
+  python3 research/partial-tracks.py PORT DIR MODEL
+
+MODEL names the model, or `fold-` to fit each sequence with the fold model `fold-<name>` that
+never saw it (a server on a cv run's models: --models runs/cv/kt-pretrained/models)."""
 import json, urllib.request, sys, glob, statistics as st
 from itertools import permutations
-port = sys.argv[1]
+port, data, model = sys.argv[1], sys.argv[2], sys.argv[3]
 def post(r):
     req = urllib.request.Request(f"http://127.0.0.1:{port}/v1/fit", data=json.dumps(r).encode(),
                                  headers={"content-type": "application/json"})
@@ -17,9 +20,10 @@ def err(truth, lab, idx):
         m = dict(zip(ks, p)); best = max(best, sum(1 for i in idx if m[truth[i]] == lab[i]))
     return 1 - best / len(idx)
 rows = []
-for f in sorted(glob.glob('../shared/datasets/kt3dmoseg/*.json')):
+for f in sorted(glob.glob(data + '/*.json')):
     d = json.load(open(f)); vis = d['visible']; n = len(vis); F = len(vis[0])
-    o = post({"kind": "trajectories", "model": "fold-" + d['name'], "points": d['points'], "visible": vis,
+    name = model + d['name'] if model == 'fold-' else model
+    o = post({"kind": "trajectories", "model": name, "points": d['points'], "visible": vis,
               "k": d['num_models'], "image_size": d['image_size'], "refine": True, "outliers": False})
     lab, truth = o['labels'], d['labels']
     comp = [i for i in range(n) if all(vis[i])]
@@ -34,5 +38,5 @@ m = lambda k: 100 * st.mean(r[k] for r in rows if r[k] is not None)
 md = lambda k: 100 * st.median(r[k] for r in rows if r[k] is not None)
 cov = sum(r['complete'] + r['placed'] for r in rows) / sum(r['n'] for r in rows)
 cov0 = sum(r['complete'] for r in rows) / sum(r['n'] for r in rows)
-print(f"mean / median %: complete {m('err_complete'):.2f} / {md('err_complete'):.2f}, placed {m('err_placed'):.2f} / {md('err_placed'):.2f}, all labelled {m('err_labelled'):.2f} / {md('err_labelled'):.2f}")
+print(f"{len(rows)} sequences; mean / median %: complete {m('err_complete'):.2f} / {md('err_complete'):.2f}, placed {m('err_placed'):.2f} / {md('err_placed'):.2f}, all labelled {m('err_labelled'):.2f} / {md('err_labelled'):.2f}")
 print(f"tracks labelled: {100*cov:.1f} % (seen throughout: {100*cov0:.1f} %)")
