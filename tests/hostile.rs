@@ -376,6 +376,11 @@ fn cases() -> Vec<Case> {
         ("k as 2.0", good_with(json!({"k": 2.0}))),
         ("k as 1e30", good_with(json!({"k": 1e30}))),
         ("k as a boolean", good_with(json!({"k": true}))),
+        ("visible as a string", good_with(json!({"visible": "all"}))),
+        (
+            "visible flags of -1",
+            good_with(json!({"visible": [[-1], [1]]})),
+        ),
         ("negative k", good_with(json!({"k": -2}))),
         (
             "k = 2^64 (overflows usize)",
@@ -484,6 +489,35 @@ fn cases() -> Vec<Case> {
         br#"{"kind":"trajectories","points":[[0,0,1,1],[1,1,2,2],[5,5,5,6]],"refine":true}"#
             .to_vec(),
         Fit(3),
+    );
+    // Tracks seen in some frames: the others are fitted, each partly seen track placed or -1,
+    // whatever its values where it was not seen; never NaN.
+    let mut seen = vec![vec![1u8; 5]; 8];
+    seen[2] = vec![0, 1, 1, 1, 0];
+    seen[5] = vec![1, 0, 0, 0, 0];
+    seen[6] = vec![0, 0, 0, 0, 0];
+    let mut hidden = traj.clone();
+    hidden[2][0] = 1e9;
+    hidden[5][9] = -1e9;
+    fit(
+        &mut cases,
+        "trajectories seen in some frames, wild values where unseen",
+        serde_json::to_vec(
+            &json!({"kind": "trajectories", "points": hidden, "visible": seen,
+                                   "refine": true, "k": 2}),
+        )
+        .unwrap(),
+        Fit(8),
+    );
+    fit(
+        &mut cases,
+        "trajectory_matrix seen in some frames, K chosen, no refinement",
+        serde_json::to_vec(
+            &json!({"kind": "trajectories", "trajectory_matrix": transpose(&traj),
+                                   "visible": seen, "refine": false}),
+        )
+        .unwrap(),
+        Fit(8),
     );
     fit(
         &mut cases,
@@ -774,6 +808,26 @@ fn cases() -> Vec<Case> {
         (
             "trajectory_matrix ragged",
             json!({"kind": "trajectories", "trajectory_matrix": ragged_matrix}),
+            "invalid_points",
+        ),
+        (
+            "visible of one track",
+            json!({"kind": "trajectories", "points": traj_rows, "visible": [[1, 1, 1, 1, 1]]}),
+            "invalid_points",
+        ),
+        (
+            "visible rows of 6 flags for 5 frames",
+            json!({"kind": "trajectories", "points": traj_rows, "visible": vec![vec![1; 6]; 8]}),
+            "invalid_points",
+        ),
+        (
+            "visible flag 7",
+            json!({"kind": "trajectories", "points": traj_rows, "visible": vec![vec![1, 1, 7, 1, 1]; 8]}),
+            "invalid_points",
+        ),
+        (
+            "no track seen in every frame",
+            json!({"kind": "trajectories", "points": traj_rows, "visible": vec![vec![0, 1, 1, 1, 1]; 8]}),
             "invalid_points",
         ),
         (
