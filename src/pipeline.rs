@@ -74,6 +74,9 @@ pub struct FitOutcome {
     pub structures: Vec<Structure>,
     /// The answer's K (structures, not counting outliers).
     pub k: usize,
+    /// With refinement that may answer outliers, the outlier threshold τ it used (caller's
+    /// units); `None` otherwise.
+    pub outlier_threshold: Option<f64>,
     /// Quantities of the input outside what the model was validated on.
     pub warnings: Vec<String>,
     /// Row-major `[n, embed_dim]`.
@@ -363,16 +366,21 @@ pub fn fit(
     let t1 = Instant::now();
     let clustering = cluster(model, &embedding, params)?;
     let t2 = Instant::now();
-    let (labels, structures, k) = match &refine_params {
+    let (labels, structures, k, outlier_threshold) = match &refine_params {
         Some(r) => {
             let refined = refine(model, points, &clustering, r);
             let k = refined.structures.len();
-            (refined.labels, refined.structures, k)
+            let tau = r.outliers.then(|| {
+                r.threshold
+                    .unwrap_or(refine::OUTLIER_SIGMAS * refined.sigma)
+            });
+            (refined.labels, refined.structures, k, tau)
         }
         None => (
             clustering.labels.iter().map(|&l| l as i64).collect(),
             Vec::new(),
             clustering.k,
+            None,
         ),
     };
     let t3 = Instant::now();
@@ -383,6 +391,7 @@ pub fn fit(
         labels,
         structures,
         k,
+        outlier_threshold,
         embeddings: embedding.per_point(),
         embed_dim: embedding.width,
         embed_ms: ms(t0, t1),
@@ -395,8 +404,10 @@ pub fn fit(
 /// the tracks seen throughout, and each other track seen in at least [`MIN_SEEN_FRAMES`] frames
 /// then goes to the motion whose subspace (the refined structure's, or one fitted on the
 /// group's tracks over every frame) is nearest over the frames it was seen in
-/// ([`masked_subspace_distance`]); a track seen in fewer frames is labelled −1. The embeddings
-/// are those of the tracks seen throughout.
+/// ([`masked_subspace_distance`], per frame as the refinement's distances are), or is an
+/// outlier (−1) beyond the refinement's outlier threshold when it may answer outliers; a track
+/// seen in fewer frames is labelled −1. The embeddings are those of the tracks seen
+/// throughout.
 pub fn fit_seen(
     model: &LoadedModel,
     points: &PointSet,
@@ -413,7 +424,13 @@ pub fn fit_seen(
         .map_err(|e| FitError::Input(e.to_string()))?;
     let mut outcome = fit(model, &throughout, image, options)?;
     let motions = motions(&throughout, &outcome);
-    let (labels, unplaced) = place(points, visibility, &complete, &outcome.labels, &motions);
+    let placing = Placing {
+        complete: &complete,
+        labels: &outcome.labels,
+        motions: &motions,
+        threshold: outcome.outlier_threshold,
+    };
+    let (labels, unplaced) = place(points, visibility, &placing);
     for s in &mut outcome.structures {
         s.inliers = labels.iter().filter(|&&l| l == s.label as i64).count();
     }
@@ -426,18 +443,23 @@ pub fn fit_seen(
     Ok(outcome)
 }
 
-/// The labels of every track: those of the `complete` tracks (`labels`, in their order), and
-/// for each other track seen in at least [`MIN_SEEN_FRAMES`] frames the label of the nearest
-/// of `motions` over its seen frames; −1 for the rest, counted.
-fn place(
-    points: &PointSet,
-    visibility: &Visibility,
-    complete: &[usize],
-    labels: &[i64],
-    motions: &[Motion],
-) -> (Vec<i64>, usize) {
+/// What partly seen tracks are placed with.
+struct Placing<'a> {
+    /// The tracks seen throughout, ascending, and their labels in that order.
+    complete: &'a [usize],
+    labels: &'a [i64],
+    motions: &'a [Motion],
+    /// The refinement's outlier threshold τ, when it may answer outliers: a track farther
+    /// than τ from every motion (over its seen frames) is an outlier.
+    threshold: Option<f64>,
+}
+
+/// The labels of every track: those of the tracks seen throughout, and for each other track
+/// seen in at least [`MIN_SEEN_FRAMES`] frames the label of the nearest motion over its seen
+/// frames (−1 beyond the outlier threshold); −1 for the rest, which are counted.
+fn place(points: &PointSet, visibility: &Visibility, placing: &Placing) -> (Vec<i64>, usize) {
     let mut out = vec![-1i64; points.len()];
-    for (&i, &l) in complete.iter().zip(labels) {
+    for (&i, &l) in placing.complete.iter().zip(placing.labels) {
         out[i] = l;
     }
     let mut unplaced = 0;
@@ -448,7 +470,8 @@ fn place(
         }
         let nearest = (seen.iter().filter(|&&s| s).count() >= MIN_SEEN_FRAMES)
             .then(|| {
-                motions
+                placing
+                    .motions
                     .iter()
                     .map(|m| {
                         let d = masked_subspace_distance(&m.mean, &m.basis, points.row(i), seen);
@@ -459,6 +482,7 @@ fn place(
             })
             .flatten();
         match nearest {
+            Some((_, d)) if placing.threshold.is_some_and(|tau| d > tau) => {}
             Some((l, _)) => *label = l as i64,
             None => unplaced += 1,
         }
@@ -653,6 +677,8 @@ pub(crate) mod tests {
             t[5] = -900.0;
             rows.push(t);
         }
+        // The first is half a pixel off its motion in frame 0.
+        rows[12][0] += 0.5;
         rows.push(track(1.0, 1.0, 0));
         let mut seen = vec![vec![1u8; 4]; 12];
         seen.extend([vec![1, 1, 0, 1], vec![1, 1, 0, 1], vec![1, 0, 0, 1]]);
@@ -660,8 +686,8 @@ pub(crate) mod tests {
         (points, Visibility::new(&seen, 15, 4).unwrap())
     }
 
-    /// A partly seen track goes to the motion nearest over its seen frames; one seen in too few
-    /// frames stays −1.
+    /// A partly seen track goes to the motion nearest over its seen frames, or is an outlier
+    /// beyond the threshold; one seen in too few frames stays −1.
     #[test]
     fn partly_seen_tracks_go_to_the_motion_of_their_seen_frames() {
         let (points, visibility) = partly_seen_tracks();
@@ -680,10 +706,23 @@ pub(crate) mod tests {
                 }
             })
             .collect();
-        let (labels, unplaced) = place(&points, &visibility, &complete, &truth, &motions);
+        let mut placing = Placing {
+            complete: &complete,
+            labels: &truth,
+            motions: &motions,
+            threshold: None,
+        };
+        let (labels, unplaced) = place(&points, &visibility, &placing);
         assert_eq!(&labels[..12], &truth[..]);
         assert_eq!(&labels[12..], &[0, 1, -1]);
         assert_eq!(unplaced, 1);
+        // With an outlier threshold, a partly seen track beyond it from every motion is an
+        // outlier (not counted as unplaced); within it, placed as before.
+        placing.threshold = Some(0.01);
+        let far = place(&points, &visibility, &placing);
+        assert_eq!((&far.0[12..], far.1), (&[-1, 1, -1][..], 1));
+        placing.threshold = Some(10.0);
+        assert_eq!(place(&points, &visibility, &placing).0, labels);
     }
 
     /// Through the pipeline: the tracks seen throughout are fitted alone (the same labels as
