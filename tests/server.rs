@@ -169,6 +169,34 @@ fn tracks_seen_in_some_frames_are_placed_on_the_motions() {
     let t: Vec<usize> = placed.iter().map(|&i| truth[i]).collect();
     let p: Vec<usize> = placed.iter().map(|&i| all[i]).collect();
     assert!(error_rate(&t, &p) < 0.05, "{}", error_rate(&t, &p));
+    // A sequence with a track seen in no frame: that track is -1, and the warning counts it.
+    let file = dataset("kt3dmoseg/Seq059_Clip01.json");
+    let visible = file["visible"].clone();
+    let few: Vec<usize> = visible
+        .as_array()
+        .unwrap()
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.as_array().unwrap().iter().filter(|x| *x == 1).count() < 3)
+        .map(|(i, _)| i)
+        .collect();
+    assert!(!few.is_empty());
+    let r = server.post_json("/v1/fit", &fit_body(&file, json!({"visible": visible})));
+    assert_eq!(r.status, 200, "{}", r.text());
+    let v = r.json();
+    let k = v["k"].as_u64().unwrap() as usize;
+    let all = labels(&v);
+    assert!(few.iter().all(|&i| all[i] == k), "-1 reads as k");
+    let warned = |w: &Value| {
+        let w = w.as_str().unwrap();
+        w.starts_with(&format!("{} track", few.len()))
+            && w.ends_with("seen in fewer than 3 frames labelled -1")
+    };
+    assert!(
+        v["warnings"].as_array().unwrap().iter().any(warned),
+        "{}",
+        v["warnings"]
+    );
 }
 
 #[test]

@@ -333,21 +333,22 @@ async fn fit(
     let ApiJson(request) = body?;
     let job = request.validate(state.models()?, &state.limits)?;
     // The picture needs the points, which the fit consumes with the job.
-    // Tracks not seen in every frame are drawn resting where they were seen.
-    let drawn = picture::wants_svg(&headers).then(|| {
-        let points = match &job.visibility {
-            Some(seen) => seen.held(&job.points),
-            None => job.points.clone(),
-        };
-        (points, job.image_size)
-    });
+    let drawn = picture::wants_svg(&headers)
+        .then(|| (job.points.clone(), job.visibility.clone(), job.image_size));
     let fitted = run_fit(&state, job).await?;
-    let Some((points, image_size)) = drawn else {
+    let Some((points, seen, image_size)) = drawn else {
         return Ok(([(header::VARY, "accept")], Json(fitted)).into_response());
     };
-    let svg = tokio::task::spawn_blocking(move || picture::svg(&points, image_size, &fitted))
-        .await
-        .map_err(|e| ApiError::internal(format!("picture failed: {e}")))?;
+    let svg = tokio::task::spawn_blocking(move || {
+        // Tracks not seen in every frame are drawn resting where they were seen.
+        let points = match seen {
+            Some(seen) => seen.held(&points),
+            None => points,
+        };
+        picture::svg(&points, image_size, &fitted)
+    })
+    .await
+    .map_err(|e| ApiError::internal(format!("picture failed: {e}")))?;
     Ok(picture::response(svg))
 }
 

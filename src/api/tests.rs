@@ -356,6 +356,12 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
             E::InvalidPoints,
         ),
         (
+            "k above the tracks seen throughout",
+            json!({"kind": "trajectories", "points": tracks(), "k": 3,
+                   "visible": [[1, 1], [1, 1], [0, 1], [0, 1], [1, 0], [0, 1], [1, 0], [0, 1]]}),
+            E::InvalidK,
+        ),
+        (
             "embeddings of partly seen tracks",
             json!({"kind": "trajectories", "points": tracks(), "return_embeddings": true,
                    "visible": [[1, 1], [1, 1], [1, 1], [0, 1], [1, 1], [1, 1], [1, 1], [1, 1]]}),

@@ -60,7 +60,7 @@ pub struct FitRequest {
     /// Trajectories: N x F flags, 1 where track i was seen in frame f, 0 where it was not (its
     /// values there are ignored).
     #[serde(default)]
-    pub visible: Option<Vec<Vec<u8>>>,
+    pub visible: Option<Vec<Vec<i64>>>,
 }
 
 /// `POST /v1/fit/batch` body as sent; entries are parsed one by one so that a bad entry gets
@@ -252,6 +252,18 @@ impl FitRequest {
             }
             Some(rows) => {
                 let v = Visibility::new(&rows, n, points.dim() / 2)?;
+                let complete = v.complete().len();
+                if let Selection::Fixed(k) = selection
+                    && k > complete
+                {
+                    return Err(ApiError::new(
+                        ErrorCode::InvalidK,
+                        format!(
+                            "k = {k} exceeds the {complete} tracks seen in every frame, which \
+                             the fit clusters"
+                        ),
+                    ));
+                }
                 if return_embeddings && !v.is_complete() {
                     return Err(ApiError::new(
                         ErrorCode::InvalidRequest,
@@ -346,7 +358,8 @@ pub struct StructureOut {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct FitResponse {
     pub model: ModelRef,
-    /// One per point: its structure, or -1 for an outlier (refinement only).
+    /// One per point: its structure, or -1 for an outlier (with refinement) or a track seen in
+    /// too few frames to place (with `visible`).
     pub labels: Vec<i64>,
     /// Structures, not counting outliers.
     pub k: usize,

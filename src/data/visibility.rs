@@ -5,7 +5,7 @@
 //! seen) and an N × F mask of 0 and 1. The fit runs on the tracks seen in every frame
 //! ([`Visibility::complete`]); each other track seen in at least [`MIN_SEEN_FRAMES`] frames then
 //! goes to the motion whose subspace explains its seen frames best
-//! ([`crate::pipeline::fit`]); a track seen in fewer frames is labelled −1.
+//! ([`crate::pipeline::fit_seen`]); a track seen in fewer frames is labelled −1.
 
 use super::points::{InputError, PointSet};
 
@@ -22,7 +22,7 @@ pub struct Visibility {
 impl Visibility {
     /// `rows`: one row per track of `frames` flags, each 0 or 1, for `tracks` tracks. At least
     /// 2 tracks must be seen in every frame (what a fit needs).
-    pub fn new(rows: &[Vec<u8>], tracks: usize, frames: usize) -> Result<Self, InputError> {
+    pub fn new(rows: &[Vec<i64>], tracks: usize, frames: usize) -> Result<Self, InputError> {
         if rows.len() != tracks {
             return Err(InputError::VisibleRows {
                 rows: rows.len(),
@@ -38,7 +38,7 @@ impl Visibility {
                     frames,
                 });
             }
-            if let Some(frame) = flags.iter().position(|&v| v > 1) {
+            if let Some(frame) = flags.iter().position(|&v| !(0..=1).contains(&v)) {
                 return Err(InputError::VisibleValue {
                     row,
                     frame,
@@ -77,20 +77,47 @@ impl Visibility {
     /// drawing: a track then rests where it was last (or first) seen. A track seen in no frame
     /// keeps its values.
     pub fn held(&self, points: &PointSet) -> PointSet {
-        let values = (0..points.len())
-            .flat_map(|i| {
-                let row = points.row(i);
-                let seen = &self.seen[i];
-                (0..seen.len()).flat_map(move |f| {
-                    let source = (0..seen.len())
-                        .filter(|&g| seen[g])
-                        .min_by_key(|&g| (g.abs_diff(f), g))
-                        .unwrap_or(f);
-                    [row[2 * source], row[2 * source + 1]]
-                })
-            })
-            .collect();
-        PointSet::from_flat(points.kind(), points.dim(), values).unwrap_or_else(|_| points.clone())
+        let mut values = points.values().to_vec();
+        let dim = points.dim();
+        for (i, seen) in self.seen.iter().enumerate() {
+            let frames = seen.len();
+            // The nearest seen frame on each side of every frame, two passes.
+            let mut left = vec![None; frames];
+            let mut last = None;
+            for f in 0..frames {
+                if seen[f] {
+                    last = Some(f);
+                }
+                left[f] = last;
+            }
+            let mut next = None;
+            for f in (0..frames).rev() {
+                if seen[f] {
+                    next = Some(f);
+                }
+                let source = match (left[f], next) {
+                    (Some(l), Some(r)) => {
+                        if f - l <= r - f {
+                            l
+                        } else {
+                            r
+                        }
+                    }
+                    (Some(l), None) => l,
+                    (None, Some(r)) => r,
+                    (None, None) => f,
+                };
+                let row = &points.values()[i * dim..(i + 1) * dim];
+                values[i * dim + 2 * f] = row[2 * source];
+                values[i * dim + 2 * f + 1] = row[2 * source + 1];
+            }
+        }
+        PointSet::from_flat(points.kind(), dim, values).unwrap_or_else(|_| points.clone())
+    }
+
+    /// Frames in the mask.
+    pub fn frames(&self) -> usize {
+        self.seen.first().map_or(0, Vec::len)
     }
 
     /// Tracks in the mask.
@@ -141,7 +168,7 @@ mod tests {
 
     #[test]
     fn masks_of_the_wrong_shape_or_values_are_refused_with_the_place() {
-        let e = |rows: &[Vec<u8>], n, f| Visibility::new(rows, n, f).unwrap_err().to_string();
+        let e = |rows: &[Vec<i64>], n, f| Visibility::new(rows, n, f).unwrap_err().to_string();
         assert_eq!(
             e(&[vec![1, 1]], 2, 2),
             "visible has 1 rows for 2 tracks: one row of 0/1 flags per track"
@@ -153,6 +180,10 @@ mod tests {
         assert_eq!(
             e(&[vec![1, 1], vec![1, 2]], 2, 2),
             "visible row 1, frame 1 is 2: flags are 0 (not seen) or 1 (seen)"
+        );
+        assert_eq!(
+            e(&[vec![-1, 1], vec![1, 1]], 2, 2),
+            "visible row 0, frame 0 is -1: flags are 0 (not seen) or 1 (seen)"
         );
         assert!(
             e(&[vec![1, 1], vec![0, 1], vec![1, 0]], 3, 2)

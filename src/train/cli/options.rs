@@ -10,7 +10,7 @@ use crate::data::{DataSource, Kind, Sequence, Symmetry};
 use crate::loss::Loss;
 use crate::model::ModelConfig;
 use crate::train::cv::{Protocol, SamplePlan, Subsample};
-use crate::train::{Schedule, TrainConfig, TrainError};
+use crate::train::{Schedule, TrainConfig};
 
 /// Data selection shared by train, eval and cv.
 #[derive(Args, Debug, Clone)]
@@ -90,7 +90,7 @@ pub struct TrainArgs {
     #[arg(long)]
     pub subsample: Option<String>,
     /// Subsampled copies per training sequence (with --subsample).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, requires = "subsample")]
     pub subsample_copies: usize,
     /// Test-time symmetries stored in the card: fits embed the input and its images under these
     /// (comma-separated: mirror, reverse, rotate) and cluster the concatenated embeddings.
@@ -189,13 +189,13 @@ impl TrainArgs {
             copies: self.subsample_copies,
             seed: self.seed,
         };
-        plan.validate().map_err(|e| match e {
-            TrainError::Config(reason) if self.subsample_copies == 0 => CliError::Flag {
-                flag: "--subsample-copies",
-                reason,
-            },
-            TrainError::Config(reason) => flag(reason),
-            other => flag(other.to_string()),
+        // The shares first, then the count, each error under its own flag.
+        Subsample { copies: 1, ..plan }
+            .validate()
+            .map_err(|e| flag(e.to_string()))?;
+        plan.validate().map_err(|e| CliError::Flag {
+            flag: "--subsample-copies",
+            reason: e.to_string(),
         })?;
         Ok(Some(plan))
     }
