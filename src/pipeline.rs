@@ -447,26 +447,26 @@ pub fn fit_seen(
             s.rms = ms.sqrt();
         }
     }
+    let tracks = |n: usize| {
+        if n == 1 {
+            ("track", "is")
+        } else {
+            ("tracks", "are")
+        }
+    };
     if placed.few > 0 {
+        let (noun, verb) = tracks(placed.few);
         outcome.warnings.push(format!(
-            "{} {} seen in fewer than {MIN_SEEN_FRAMES} frames labelled -1",
-            placed.few,
-            if placed.few == 1 {
-                "track is"
-            } else {
-                "tracks are"
-            },
+            "{} {noun} seen in fewer than {MIN_SEEN_FRAMES} frames {verb} labelled -1",
+            placed.few
         ));
     }
     if placed.homeless > 0 {
+        let (noun, verb) = tracks(placed.homeless);
         outcome.warnings.push(format!(
-            "{} partly seen {} labelled -1: no structure has a motion subspace to place {} on",
+            "{} partly seen {noun} {verb} labelled -1: no structure has a motion subspace to \
+             place {} on",
             placed.homeless,
-            if placed.homeless == 1 {
-                "track is"
-            } else {
-                "tracks are"
-            },
             if placed.homeless == 1 { "it" } else { "them" },
         ));
     }
@@ -825,7 +825,7 @@ pub(crate) mod tests {
         assert!(
             out.warnings
                 .iter()
-                .any(|w| w == "1 track is seen in fewer than 3 frames labelled -1"),
+                .any(|w| w == "1 track seen in fewer than 3 frames is labelled -1"),
             "{:?}",
             out.warnings
         );
