@@ -503,7 +503,10 @@ struct Placed {
 
 /// The labels of every track: those of the tracks seen throughout, and for each other track
 /// seen in at least [`MIN_SEEN_FRAMES`] frames the label of the nearest motion over its seen
-/// frames (−1 beyond the threshold); −1 for the rest.
+/// frames (−1 beyond the threshold); −1 for the rest. Nearest by the residual per degree of
+/// freedom, e² / (2f − r) over f seen frames and a motion of rank r: a motion of higher rank
+/// fits a few coordinates more closely whatever the track, and this is each motion's unbiased
+/// noise estimate.
 fn place(points: &PointSet, visibility: &Visibility, placing: &Placing) -> Placed {
     let n = points.len();
     let mut out = Placed {
@@ -524,15 +527,18 @@ fn place(points: &PointSet, visibility: &Visibility, placing: &Placing) -> Place
             out.few += 1;
             continue;
         }
+        let frames = seen.iter().filter(|&&s| s).count() as f64;
         let nearest = placing
             .motions
             .iter()
             .map(|m| {
                 let d = masked_subspace_distance(&m.mean, &m.basis, points.row(i), seen);
-                (m.label, d)
+                let free = 2.0 * frames - m.basis.len() as f64;
+                (m.label, d, d * d * frames / free)
             })
-            .filter(|(_, d)| d.is_finite())
-            .min_by(|a, b| a.1.total_cmp(&b.1));
+            .filter(|(_, d, _)| d.is_finite())
+            .min_by(|a, b| a.2.total_cmp(&b.2))
+            .map(|(l, d, _)| (l, d));
         match nearest {
             Some((_, d)) if placing.threshold.is_some_and(|tau| d > tau) => {}
             Some((l, d)) => {
