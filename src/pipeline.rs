@@ -18,6 +18,7 @@
 //! 6. **answer** ([`FitOutcome`]): labels, K, structures, the residual curve and the stage
 //!    timings.
 
+use std::collections::BTreeMap;
 use std::time::Instant;
 
 use crate::cluster::{self, ClusterError, ClusterParams, Clustering, Points, Selection};
@@ -395,10 +396,12 @@ pub fn fit(
 /// the tracks seen throughout, and each other track seen in at least [`MIN_SEEN_FRAMES`] frames
 /// then goes to the motion whose subspace (the refined structure's, or one fitted on the
 /// group's tracks over every frame) is nearest over the frames it was seen in
-/// ([`masked_subspace_distance`], per frame as the refinement's distances are); with the
-/// caller's outlier threshold it is an outlier (−1) beyond it. A track seen in fewer frames, or
-/// with no motion to join, is −1, and the warnings count both. Structures then count, and
-/// measure their RMS over, every track labelled with them; the placement's time counts as
+/// ([`nearest_motion`]); with the caller's outlier threshold it is an outlier (−1) beyond it.
+/// A track seen in enough consecutive frames for the network may then be placed by it instead,
+/// window by window, where the network places the tracks seen throughout better
+/// ([`Window::place`]). A track seen in fewer frames, or with no motion to join, is −1, and the
+/// warnings count both. Structures then count, and measure their RMS over, every track labelled
+/// with them (a partly seen one over its seen frames); the placement's time counts as
 /// refinement's. The embeddings are those of the tracks seen throughout.
 pub fn fit_seen(
     model: &LoadedModel,
@@ -435,11 +438,24 @@ pub fn fit_seen(
             .filter(|r| r.outliers)
             .and_then(|r| r.threshold),
     };
-    let placed = place(points, visibility, &placing);
+    let mut placed = place(points, visibility, &placing);
+    let window = Window {
+        model,
+        image,
+        options,
+    };
+    window.place(points, visibility, &complete, &mut placed)?;
     for s in &mut outcome.structures {
+        // A partly seen track's distance over the frames it was seen in.
+        let distance = |i: usize| match &s.model {
+            Model::Subspace { mean, basis, .. } if !visibility.seen(i).iter().all(|&v| v) => {
+                masked_subspace_distance(mean, basis, points.row(i), visibility.seen(i))
+            }
+            model => model.residual(points.row(i)),
+        };
         let distances: Vec<f64> = (0..points.len())
             .filter(|&i| placed.labels[i] == s.label as i64)
-            .map(|i| placed.distances[i].unwrap_or_else(|| s.model.residual(points.row(i))))
+            .map(distance)
             .collect();
         s.inliers = distances.len();
         let ms = distances.iter().map(|d| d * d).sum::<f64>() / distances.len().max(1) as f64;
@@ -492,8 +508,6 @@ struct Placing<'a> {
 /// Where [`place`] put every track.
 struct Placed {
     labels: Vec<i64>,
-    /// A placed partly seen track's distance to its motion over its seen frames.
-    distances: Vec<Option<f64>>,
     /// Partly seen tracks seen in fewer than [`MIN_SEEN_FRAMES`] frames.
     few: usize,
     /// Partly seen tracks with no motion to join (no structure has a subspace, or none
@@ -511,7 +525,6 @@ fn place(points: &PointSet, visibility: &Visibility, placing: &Placing) -> Place
     let n = points.len();
     let mut out = Placed {
         labels: vec![-1; n],
-        distances: vec![None; n],
         few: 0,
         homeless: 0,
     };
@@ -527,28 +540,188 @@ fn place(points: &PointSet, visibility: &Visibility, placing: &Placing) -> Place
             out.few += 1;
             continue;
         }
-        let frames = seen.iter().filter(|&&s| s).count() as f64;
-        let nearest = placing
-            .motions
-            .iter()
-            .map(|m| {
-                let d = masked_subspace_distance(&m.mean, &m.basis, points.row(i), seen);
-                let free = 2.0 * frames - m.basis.len() as f64;
-                (m.label, d, d * d * frames / free)
-            })
-            .filter(|(_, d, _)| d.is_finite())
-            .min_by(|a, b| a.2.total_cmp(&b.2))
-            .map(|(l, d, _)| (l, d));
-        match nearest {
+        match nearest_motion(placing.motions, points.row(i), seen) {
             Some((_, d)) if placing.threshold.is_some_and(|tau| d > tau) => {}
-            Some((l, d)) => {
-                out.labels[i] = l as i64;
-                out.distances[i] = Some(d);
-            }
+            Some((l, _)) => out.labels[i] = l as i64,
             None => out.homeless += 1,
         }
     }
     out
+}
+
+/// The motion nearest `row` over its `seen` frames, by the residual per degree of freedom
+/// e² / (2f − r) (f frames seen, r the motion's rank: a motion of higher rank fits a few
+/// coordinates more closely whatever the track), with its per-frame distance
+/// ([`masked_subspace_distance`]); `None` when no motion determines the track's coefficients.
+fn nearest_motion(motions: &[Motion], row: &[f64], seen: &[bool]) -> Option<(usize, f64)> {
+    let frames = seen.iter().filter(|&&s| s).count() as f64;
+    motions
+        .iter()
+        .map(|m| {
+            let d = masked_subspace_distance(&m.mean, &m.basis, row, seen);
+            let free = 2.0 * frames - m.basis.len() as f64;
+            (m.label, d, d * d * frames / free)
+        })
+        .filter(|(_, d, _)| d.is_finite())
+        .min_by(|a, b| a.2.total_cmp(&b.2))
+        .map(|(l, d, _)| (l, d))
+}
+
+/// Placement of partly seen tracks by the network, window by window.
+struct Window<'a> {
+    model: &'a LoadedModel,
+    image: Option<ImageSize>,
+    options: &'a FitOptions<'a>,
+}
+
+/// The label of the nearest centroid (`sums` of embeddings and counts by label) to `v`.
+fn nearest_centroid(sums: &BTreeMap<i64, (Vec<f64>, usize)>, v: &[f32]) -> Option<i64> {
+    sums.iter()
+        .filter(|(_, (_, n))| *n > 0)
+        .map(|(&l, (sum, n))| {
+            let d: f64 = sum
+                .iter()
+                .zip(v)
+                .map(|(s, &x)| (s / *n as f64 - f64::from(x)).powi(2))
+                .sum();
+            (l, d)
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(l, _)| l)
+}
+
+impl Window<'_> {
+    /// Partly seen tracks with a run of at least the network's frame count of consecutive seen
+    /// frames: the window of that many frames centred in the run is embedded with every track
+    /// seen in all of it. Where the network's label centroids place the tracks seen throughout
+    /// better than the motion subspaces do over the window's frames (each half of them judged
+    /// by both fitted on the other half), the window's partly seen tracks take the label of
+    /// the nearest centroid.
+    fn place(
+        &self,
+        points: &PointSet,
+        visibility: &Visibility,
+        complete: &[usize],
+        placed: &mut Placed,
+    ) -> Result<(), FitError> {
+        let width = self.model.card.input_dim / 2;
+        let frames = visibility.frames();
+        if width < 2 || width > frames {
+            return Ok(());
+        }
+        let mut windows: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+        for i in 0..points.len() {
+            let seen = visibility.seen(i);
+            if seen.iter().all(|&s| s) || placed.labels[i] < 0 {
+                continue;
+            }
+            let (mut best, mut run) = ((0, 0), 0);
+            for (f, &s) in seen.iter().enumerate() {
+                run = if s { run + 1 } else { 0 };
+                if run > best.1 {
+                    best = (f + 1 - run, run);
+                }
+            }
+            if best.1 >= width {
+                windows
+                    .entry(best.0 + (best.1 - width) / 2)
+                    .or_default()
+                    .push(i);
+            }
+        }
+        let labelled: Vec<usize> = complete
+            .iter()
+            .copied()
+            .filter(|&i| placed.labels[i] >= 0)
+            .collect();
+        for (start, tracks) in windows {
+            let rows: Vec<usize> = (0..points.len())
+                .filter(|&i| visibility.seen(i)[start..start + width].iter().all(|&s| s))
+                .collect();
+            let values: Vec<f64> = rows
+                .iter()
+                .flat_map(|&i| {
+                    points.row(i)[2 * start..2 * (start + width)]
+                        .iter()
+                        .copied()
+                })
+                .collect();
+            let cut = PointSet::from_flat(Kind::Trajectories, 2 * width, values)
+                .map_err(|e| FitError::Input(e.to_string()))?;
+            let options = self.options;
+            let z = embed(
+                self.model,
+                &cut,
+                self.image,
+                options.symmetries,
+                options.params.seed(),
+            )?;
+            let e = z.width;
+            let z = z.per_point();
+            let at = |i: usize| rows.binary_search(&i).ok().map(|r| &z[r * e..(r + 1) * e]);
+            let centroids = |tracks: &[usize]| {
+                let mut sums: BTreeMap<i64, (Vec<f64>, usize)> = BTreeMap::new();
+                for &i in tracks {
+                    let Some(v) = at(i) else { continue };
+                    let entry = sums
+                        .entry(placed.labels[i])
+                        .or_insert_with(|| (vec![0.0; e], 0));
+                    for (a, &b) in entry.0.iter_mut().zip(v) {
+                        *a += f64::from(b);
+                    }
+                    entry.1 += 1;
+                }
+                sums
+            };
+            // The judge: each half placed by both methods fitted on the other half.
+            let seen_in_window: Vec<bool> = (0..frames)
+                .map(|f| (start..start + width).contains(&f))
+                .collect();
+            let halves: [Vec<usize>; 2] = [
+                labelled.iter().copied().step_by(2).collect(),
+                labelled.iter().copied().skip(1).step_by(2).collect(),
+            ];
+            let (mut network, mut subspaces) = (0, 0);
+            for (fitted, judged) in [(&halves[0], &halves[1]), (&halves[1], &halves[0])] {
+                let sums = centroids(fitted);
+                let motions: Vec<Motion> = sums
+                    .keys()
+                    .filter_map(|&l| {
+                        let rows: Vec<&[f64]> = fitted
+                            .iter()
+                            .filter(|&&i| placed.labels[i] == l)
+                            .map(|&i| points.row(i))
+                            .collect();
+                        match geometry::fit_type("subspace", &rows)?.model {
+                            Model::Subspace { mean, basis, .. } => Some(Motion {
+                                label: l as usize,
+                                mean,
+                                basis,
+                            }),
+                            _ => None,
+                        }
+                    })
+                    .collect();
+                for &i in judged {
+                    let l = placed.labels[i];
+                    let by_network = at(i).and_then(|v| nearest_centroid(&sums, v));
+                    network += usize::from(by_network == Some(l));
+                    let by_subspace = nearest_motion(&motions, points.row(i), &seen_in_window);
+                    subspaces += usize::from(by_subspace.is_some_and(|(m, _)| m as i64 == l));
+                }
+            }
+            if network <= subspaces {
+                continue;
+            }
+            let sums = centroids(&labelled);
+            for i in tracks {
+                if let Some(l) = at(i).and_then(|v| nearest_centroid(&sums, v)) {
+                    placed.labels[i] = l;
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 /// A label's motion: the affine subspace its tracks lie in.
@@ -778,8 +951,6 @@ pub(crate) mod tests {
         assert_eq!(&labels[..12], &truth[..]);
         assert_eq!(&labels[12..], &[0, 1, -1]);
         assert_eq!((placed.few, placed.homeless), (1, 0));
-        assert!(placed.distances[12].is_some_and(|d| d > 0.01));
-        assert!(placed.distances[13].is_some_and(|d| d < 1e-6));
         // No motion to join: every partly seen track is homeless.
         let none = Placing {
             motions: &[],
@@ -794,6 +965,18 @@ pub(crate) mod tests {
         assert_eq!((&far.labels[12..], far.few), (&[-1, 1, -1][..], 1));
         placing.threshold = Some(10.0);
         assert_eq!(place(&points, &visibility, &placing).labels, labels);
+    }
+
+    #[test]
+    fn the_nearest_centroid_is_that_of_the_nearest_mean() {
+        let mut sums = BTreeMap::new();
+        // Label 0: mean (1, 0); label 1: mean (0, 2); label 2: no tracks.
+        sums.insert(0, (vec![3.0, 0.0], 3));
+        sums.insert(1, (vec![0.0, 4.0], 2));
+        sums.insert(2, (vec![0.0, 0.0], 0));
+        assert_eq!(nearest_centroid(&sums, &[0.9, 0.2]), Some(0));
+        assert_eq!(nearest_centroid(&sums, &[0.1, 1.5]), Some(1));
+        assert_eq!(nearest_centroid(&BTreeMap::new(), &[0.0, 0.0]), None);
     }
 
     /// Through the pipeline: the tracks seen throughout are fitted alone (the same labels as

@@ -4,8 +4,9 @@
 //! A request sends every track over all F frames (any finite numbers where a track was not
 //! seen) and an N × F mask of 0 and 1. The fit runs on the tracks seen in every frame
 //! ([`Visibility::complete`]); each other track seen in at least [`MIN_SEEN_FRAMES`] frames then
-//! goes to the motion whose subspace explains its seen frames best
-//! ([`crate::pipeline::fit_seen`]); a track seen in fewer frames is labelled −1.
+//! goes to the motion whose subspace explains its seen frames best, or where the network does
+//! better, to the motion it places it with ([`crate::pipeline::fit_seen`]); a track seen in
+//! fewer frames is labelled −1.
 
 use super::points::{InputError, PointSet};
 
