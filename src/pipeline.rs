@@ -448,7 +448,7 @@ pub fn fit_seen(
     for s in &mut outcome.structures {
         // A partly seen track's distance over the frames it was seen in.
         let distance = |i: usize| match &s.model {
-            Model::Subspace { mean, basis, .. } if !visibility.seen(i).iter().all(|&v| v) => {
+            Model::Subspace { mean, basis, .. } if !visibility.throughout(i) => {
                 masked_subspace_distance(mean, basis, points.row(i), visibility.seen(i))
             }
             model => model.residual(points.row(i)),
@@ -533,7 +533,7 @@ fn place(points: &PointSet, visibility: &Visibility, placing: &Placing) -> Place
     }
     for i in 0..n {
         let seen = visibility.seen(i);
-        if seen.iter().all(|&s| s) {
+        if visibility.throughout(i) {
             continue;
         }
         if seen.iter().filter(|&&s| s).count() < MIN_SEEN_FRAMES {
@@ -611,12 +611,11 @@ impl Window<'_> {
         }
         let mut windows: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
         for i in 0..points.len() {
-            let seen = visibility.seen(i);
-            if seen.iter().all(|&s| s) || placed.labels[i] < 0 {
+            if visibility.throughout(i) || placed.labels[i] < 0 {
                 continue;
             }
             let (mut best, mut run) = ((0, 0), 0);
-            for (f, &s) in seen.iter().enumerate() {
+            for (f, &s) in visibility.seen(i).iter().enumerate() {
                 run = if s { run + 1 } else { 0 };
                 if run > best.1 {
                     best = (f + 1 - run, run);
@@ -629,11 +628,40 @@ impl Window<'_> {
                     .push(i);
             }
         }
+        if windows.is_empty() {
+            return Ok(());
+        }
         let labelled: Vec<usize> = complete
             .iter()
             .copied()
             .filter(|&i| placed.labels[i] >= 0)
             .collect();
+        // The judge: each half of the tracks seen throughout placed by both methods fitted on
+        // the other half. The halves' motions (fitted over every frame) serve every window.
+        let halves: [Vec<usize>; 2] = [
+            labelled.iter().copied().step_by(2).collect(),
+            labelled.iter().copied().skip(1).step_by(2).collect(),
+        ];
+        let half_motions = |half: &[usize]| -> Vec<Motion> {
+            let mut labels: Vec<i64> = half.iter().map(|&i| placed.labels[i]).collect();
+            labels.sort_unstable();
+            labels.dedup();
+            labels
+                .into_iter()
+                .filter_map(|l| {
+                    let rows: Vec<&[f64]> = half
+                        .iter()
+                        .filter(|&&i| placed.labels[i] == l)
+                        .map(|&i| points.row(i))
+                        .collect();
+                    Motion::fitted(l as usize, &rows)
+                })
+                .collect()
+        };
+        let judges = [
+            (&halves[0], &halves[1], half_motions(&halves[0])),
+            (&halves[1], &halves[0], half_motions(&halves[1])),
+        ];
         for (start, tracks) in windows {
             let rows: Vec<usize> = (0..points.len())
                 .filter(|&i| visibility.seen(i)[start..start + width].iter().all(|&s| s))
@@ -673,40 +701,17 @@ impl Window<'_> {
                 }
                 sums
             };
-            // The judge: each half placed by both methods fitted on the other half.
             let seen_in_window: Vec<bool> = (0..frames)
                 .map(|f| (start..start + width).contains(&f))
                 .collect();
-            let halves: [Vec<usize>; 2] = [
-                labelled.iter().copied().step_by(2).collect(),
-                labelled.iter().copied().skip(1).step_by(2).collect(),
-            ];
             let (mut network, mut subspaces) = (0, 0);
-            for (fitted, judged) in [(&halves[0], &halves[1]), (&halves[1], &halves[0])] {
+            for (fitted, judged, motions) in &judges {
                 let sums = centroids(fitted);
-                let motions: Vec<Motion> = sums
-                    .keys()
-                    .filter_map(|&l| {
-                        let rows: Vec<&[f64]> = fitted
-                            .iter()
-                            .filter(|&&i| placed.labels[i] == l)
-                            .map(|&i| points.row(i))
-                            .collect();
-                        match geometry::fit_type("subspace", &rows)?.model {
-                            Model::Subspace { mean, basis, .. } => Some(Motion {
-                                label: l as usize,
-                                mean,
-                                basis,
-                            }),
-                            _ => None,
-                        }
-                    })
-                    .collect();
-                for &i in judged {
+                for &i in judged.iter() {
                     let l = placed.labels[i];
                     let by_network = at(i).and_then(|v| nearest_centroid(&sums, v));
                     network += usize::from(by_network == Some(l));
-                    let by_subspace = nearest_motion(&motions, points.row(i), &seen_in_window);
+                    let by_subspace = nearest_motion(motions, points.row(i), &seen_in_window);
                     subspaces += usize::from(by_subspace.is_some_and(|(m, _)| m as i64 == l));
                 }
             }
@@ -731,22 +736,34 @@ struct Motion {
     basis: Vec<Vec<f64>>,
 }
 
+impl Motion {
+    /// The motion of a subspace model; `None` for any other model.
+    fn of(label: usize, model: &Model) -> Option<Self> {
+        match model {
+            Model::Subspace { mean, basis, .. } => Some(Self {
+                label,
+                mean: mean.clone(),
+                basis: basis.clone(),
+            }),
+            _ => None,
+        }
+    }
+
+    /// The subspace fitted on `rows` (tracks over every frame); `None` where they determine
+    /// none.
+    fn fitted(label: usize, rows: &[&[f64]]) -> Option<Self> {
+        Self::of(label, &geometry::fit_type("subspace", rows)?.model)
+    }
+}
+
 /// Each label's motion: the refined structure's subspace, or, without refinement, one fitted on
 /// the label's tracks over every frame.
 fn motions(points: &PointSet, outcome: &FitOutcome) -> Vec<Motion> {
-    let subspace = |label: usize, model: &Model| match model {
-        Model::Subspace { mean, basis, .. } => Some(Motion {
-            label,
-            mean: mean.clone(),
-            basis: basis.clone(),
-        }),
-        _ => None,
-    };
     if !outcome.structures.is_empty() {
         return outcome
             .structures
             .iter()
-            .filter_map(|s| subspace(s.label, &s.model))
+            .filter_map(|s| Motion::of(s.label, &s.model))
             .collect();
     }
     (0..outcome.k)
@@ -755,7 +772,7 @@ fn motions(points: &PointSet, outcome: &FitOutcome) -> Vec<Motion> {
                 .filter(|&i| outcome.labels[i] == l as i64)
                 .map(|i| points.row(i))
                 .collect();
-            subspace(l, &geometry::fit_type("subspace", &rows)?.model)
+            Motion::fitted(l, &rows)
         })
         .collect()
 }
@@ -930,14 +947,7 @@ pub(crate) mod tests {
         let motions: Vec<Motion> = (0..2)
             .map(|m| {
                 let rows: Vec<&[f64]> = (6 * m..6 * m + 6).map(|i| points.row(i)).collect();
-                match geometry::fit_type("subspace", &rows).unwrap().model {
-                    Model::Subspace { mean, basis, .. } => Motion {
-                        label: m,
-                        mean,
-                        basis,
-                    },
-                    other => panic!("{other:?}"),
-                }
+                Motion::fitted(m, &rows).expect("a subspace")
             })
             .collect();
         let mut placing = Placing {

@@ -220,14 +220,9 @@ impl Sequence {
 
     /// The rows `rows` of the sequence (labels, visibility and all), in the order given.
     pub fn rows(&self, rows: &[usize]) -> Sequence {
-        let values: Vec<f64> = rows
-            .iter()
-            .flat_map(|&i| self.points.row(i).iter().copied())
-            .collect();
         Sequence {
             name: self.name.clone(),
-            points: PointSet::from_flat(self.points.kind(), self.points.dim(), values)
-                .expect("rows of a valid set"),
+            points: self.points.select(rows).expect("rows of a valid set"),
             labels: rows.iter().map(|&i| self.labels[i]).collect(),
             image_size: self.image_size,
             model_type: self.model_type.clone(),

@@ -59,13 +59,18 @@ impl Visibility {
     /// The tracks seen in every frame, ascending.
     pub fn complete(&self) -> Vec<usize> {
         (0..self.seen.len())
-            .filter(|&i| self.seen[i].iter().all(|&s| s))
+            .filter(|&i| self.throughout(i))
             .collect()
+    }
+
+    /// Whether track `i` was seen in every frame.
+    pub fn throughout(&self, i: usize) -> bool {
+        self.seen[i].iter().all(|&s| s)
     }
 
     /// Whether every track was seen in every frame.
     pub fn is_complete(&self) -> bool {
-        self.seen.iter().all(|row| row.iter().all(|&s| s))
+        (0..self.seen.len()).all(|i| self.throughout(i))
     }
 
     /// The frames track `i` was seen in.
