@@ -4,7 +4,8 @@
 //!    must be the model's kind; tracks of any length F ≥ 2 are read at the model's frame count
 //!    (frames spread over the whole track, or the first ones, as the card says); coordinates are
 //!    mapped into the frame the network was trained in; a set denser than the model's training
-//!    sets is read at a subset of the training density ([`crate::data::density`]).
+//!    sets is read at a subset of the training density, and one much sparser by the card's
+//!    network for sparse sets where it has one ([`crate::data::density`]).
 //! 2. **features** ([`network_input`]): the offsets to each point's nearest neighbours. Training
 //!    builds its input with the same function, so training and serving cannot drift apart.
 //! 3. **embed** ([`embed`]): every network of the model on the input and on its images under the
@@ -161,22 +162,49 @@ pub fn prepare(
     ))
 }
 
-/// Stage 1: the rows of the set the network reads, and for every input row its read row:
-/// `None` when every row is read, else a seeded subset at the density of the model's training
-/// sets (cards that record their training spacing). `read` is the set at the model's frames.
-fn rows_read(
+/// How the network reads a set (stage 1).
+struct ReadPlan {
+    /// The rows read, and for every input row its read row; `None`: every row.
+    thinned: Option<(Vec<usize>, Vec<usize>)>,
+    /// Whether the card's network for sparse sets reads it.
+    sparse: bool,
+}
+
+/// Stage 1: how the model reads the set ([`density::reading`]) for cards that record their
+/// training spacing (else whole, by the card's networks): a set denser than training at a seeded
+/// subset, one sparser than the card's sparse network's threshold by that network. `read` is the
+/// set at the model's frames.
+fn read_plan(
     model: &LoadedModel,
     read: &PointSet,
     image: Option<ImageSize>,
     seed: u64,
-) -> Option<(Vec<usize>, Vec<usize>)> {
+) -> ReadPlan {
     let card = &model.card;
-    let trained = card.spacing?;
+    let whole = ReadPlan {
+        thinned: None,
+        sparse: false,
+    };
+    let Some(trained) = card.spacing else {
+        return whole;
+    };
     let normalised = card.normalization.apply(read, image);
     let k = card.architecture.neighbors;
-    let rows = density::thin(&normalised, read.dim(), k, trained, seed)?;
-    let owner = density::nearest_read(&normalised, read.dim(), &rows);
-    Some((rows, owner))
+    let above = card.sparse.as_ref().map(|s| s.above);
+    match density::reading(&normalised, read.dim(), k, trained, above, seed) {
+        density::Reading::Whole => whole,
+        density::Reading::Sparse => ReadPlan {
+            thinned: None,
+            sparse: true,
+        },
+        density::Reading::Thinned(rows) => {
+            let owner = density::nearest_read(&normalised, read.dim(), &rows);
+            ReadPlan {
+                thinned: Some((rows, owner)),
+                sparse: false,
+            }
+        }
+    }
 }
 
 /// The embeddings of a set: one row per point read.
@@ -207,8 +235,8 @@ impl Embedding {
 
 /// Stage 3: the embeddings a fit clusters: `points` `[n, d]` -> `[m, e * c]` over the m rows
 /// read (a set denser than the model's training sets is thinned, with `seed`), where c counts
-/// the frame windows read ([`frames_read`]) times the networks (the card's and its members)
-/// times the images (the input and its images under every combination of `symmetries`). Row i
+/// the frame windows read ([`frames_read`]) times the networks (the card's and its members, or
+/// for a set sparser than training its network for sparse sets alone) times the images (the input and its images under every combination of `symmetries`). Row i
 /// holds the embeddings of point i by each network of each image of each window (networks vary
 /// fastest, windows slowest), side by side, divided by the square root of c so that it keeps
 /// unit length. An image that does not exist (a symmetry that does not apply to the kind, or
@@ -222,14 +250,15 @@ pub fn embed(
 ) -> Result<Embedding, FitError> {
     check(model, points)?;
     let mut windows = frames_read(model, points);
-    let (rows, owner) = rows_read(model, &windows[0], image, seed).unzip();
+    let ReadPlan { thinned, sparse } = read_plan(model, &windows[0], image, seed);
+    let (rows, owner) = thinned.unzip();
     // The windows side by side on the model's threads (each one's neighbour searches run on
     // one thread; its forward pass spreads over all of them).
     let pool = model.pool();
     let blocks = pool
         .install(|| {
             pool.map(&mut windows, |read| {
-                embed_rows(model, read, rows.as_deref(), image, symmetries)
+                embed_rows(model, read, rows.as_deref(), sparse, image, symmetries)
             })
         })
         .into_iter()
@@ -243,12 +272,14 @@ pub fn embed(
     })
 }
 
-/// [`embed`] of the given rows (`None`: all) of `read`, one window at the model's frames:
+/// [`embed`] of the given rows (`None`: all) of `read`, one window at the model's frames, by
+/// the card's networks or (`sparse`) its network for sparse sets:
 /// -> (`[m, width]`, width), rows of unit length.
 fn embed_rows(
     model: &LoadedModel,
     read: &PointSet,
     rows: Option<&[usize]>,
+    sparse: bool,
     image: Option<ImageSize>,
     symmetries: &[Symmetry],
 ) -> Result<(Vec<f32>, usize), FitError> {
@@ -270,7 +301,7 @@ fn embed_rows(
     let mut all = Vec::new();
     for per_image in pool.install(|| {
         pool.map(&mut images, |p| {
-            prepare(model, p, image).map(|input| model.embed_all(&input))
+            prepare(model, p, image).map(|input| model.embed_all(&input, sparse))
         })
     }) {
         all.extend(per_image?);

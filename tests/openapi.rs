@@ -177,6 +177,7 @@ fn shipped_model_cards_match_the_schema() {
     let s = schema(&spec, "ModelCard");
     let props = keys(&s["properties"]);
     let arch = keys(&s["properties"]["architecture"]["properties"]);
+    let mut sparse_networks = 0;
     for entry in std::fs::read_dir(common::repo().join("models")).unwrap() {
         let path = entry.unwrap().path().join("model.json");
         let card: serde_json::Value =
@@ -212,7 +213,15 @@ fn shipped_model_cards_match_the_schema() {
             let have: BTreeSet<String> = m.as_object().unwrap().keys().cloned().collect();
             assert_eq!(have, member, "{}: member {m}", path.display());
         }
+        if let Some(sparse) = card.get("sparse") {
+            let have: BTreeSet<String> = sparse.as_object().unwrap().keys().cloned().collect();
+            let documented = keys(&s["properties"]["sparse"]["properties"]);
+            assert_eq!(have, documented, "{}: sparse", path.display());
+            sparse_networks += 1;
+        }
     }
+    // lce reads sparse sets with its second network: the check above ran on it.
+    assert!(sparse_networks >= 1);
 }
 
 #[test]

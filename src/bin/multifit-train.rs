@@ -45,6 +45,8 @@ enum Command {
     Cv(CvCmd),
     /// Combine trained models into one that clusters all their embeddings side by side.
     Ensemble(EnsembleCmd),
+    /// Give a model a second network that reads the sets sparser than its training sets.
+    Sparse(SparseCmd),
     /// The robustness grid: a model evaluated on inputs that drift from its training data
     /// (density, scale, structure mix, arcs, outliers, similarity; subsampling, rescaling;
     /// frame strides), written as a Markdown table and JSON.
@@ -104,6 +106,23 @@ struct EnsembleCmd {
     /// The ensemble's name (default: the output directory's name).
     #[arg(long)]
     name: Option<String>,
+}
+
+#[derive(Args, Debug)]
+struct SparseCmd {
+    /// The model directory (it must record its training spacing).
+    #[arg(long)]
+    model: PathBuf,
+    /// The model directory of the network for sparse sets (a single network of the same
+    /// architecture).
+    #[arg(long)]
+    network: PathBuf,
+    /// Sets whose spacing exceeds this multiple of the training spacing are read by it (>= 1).
+    #[arg(long)]
+    above: f64,
+    /// Output model directory.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -259,6 +278,12 @@ fn run(command: Command) -> Result<()> {
         }
         Command::Ensemble(a) => {
             println!("{}", ensemble::run(&a.models, &a.out, a.name.as_deref())?);
+        }
+        Command::Sparse(a) => {
+            println!(
+                "{}",
+                ensemble::run_sparse(&a.model, &a.network, a.above, &a.out)?
+            );
         }
         Command::Robustness(a) => {
             let settings = GridSettings {

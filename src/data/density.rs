@@ -13,6 +13,10 @@
 //! nearest neighbours of a dense set lie across the noise band too, so one step falls short),
 //! never below [`MIN_READ`] points. A set within the tolerance of training, or sparser, is read
 //! whole.
+//!
+//! **Sparser sets.** Thinning cannot make a set denser. A card may name a second network trained
+//! on sparse sets ([`crate::registry::SparseNetwork`]); a set with s > `above` · s₀ is read whole
+//! by that network instead ([`reading`]).
 
 use rand::SeedableRng;
 use rand::rngs::ChaCha8Rng;
@@ -53,9 +57,54 @@ pub fn spacing(points: &[f32], dim: usize, k: usize) -> f64 {
     d[(n - 1) / 2]
 }
 
+/// How a model reads a set ([`reading`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Reading {
+    /// Every row, by the card's networks.
+    Whole,
+    /// A sorted seeded subset of the rows, by the card's networks: the set is denser than the
+    /// training sets.
+    Thinned(Vec<usize>),
+    /// Every row, by the card's network for sparse sets.
+    Sparse,
+}
+
+/// How a model trained at spacing `trained` with `k` neighbours reads `points` `[n, dim]`:
+/// by its network for sparse sets when the set's spacing exceeds `sparse_above` × `trained`
+/// (cards with such a network), else thinned ([`thin`]) or whole.
+pub fn reading(
+    points: &[f32],
+    dim: usize,
+    k: usize,
+    trained: f64,
+    sparse_above: Option<f64>,
+    seed: u64,
+) -> Reading {
+    if trained.is_nan() || trained <= 0.0 {
+        return Reading::Whole;
+    }
+    let s = spacing(points, dim, k);
+    if sparse_above.is_some_and(|above| s > above * trained) {
+        return Reading::Sparse;
+    }
+    thin_from(points, dim, k, trained, seed, s).map_or(Reading::Whole, Reading::Thinned)
+}
+
 /// The rows to read of `points` `[n, dim]` for a model trained at spacing `trained` with `k`
 /// neighbours: `None` to read them all, else a sorted seeded random subset.
 pub fn thin(points: &[f32], dim: usize, k: usize, trained: f64, seed: u64) -> Option<Vec<usize>> {
+    thin_from(points, dim, k, trained, seed, spacing(points, dim, k))
+}
+
+/// [`thin`] of a set whose spacing is `whole`.
+fn thin_from(
+    points: &[f32],
+    dim: usize,
+    k: usize,
+    trained: f64,
+    seed: u64,
+    whole: f64,
+) -> Option<Vec<usize>> {
     let n = points.len() / dim.max(1);
     if trained.is_nan() || trained <= 0.0 {
         return None;
@@ -66,12 +115,16 @@ pub fn thin(points: &[f32], dim: usize, k: usize, trained: f64, seed: u64) -> Op
         if rows.len() <= MIN_READ {
             break;
         }
-        let subset: Vec<f32> = rows
-            .iter()
-            .flat_map(|&i| &points[i * dim..(i + 1) * dim])
-            .copied()
-            .collect();
-        let s = spacing(&subset, dim, k);
+        let s = if rows.len() == n {
+            whole
+        } else {
+            let subset: Vec<f32> = rows
+                .iter()
+                .flat_map(|&i| &points[i * dim..(i + 1) * dim])
+                .copied()
+                .collect();
+            spacing(&subset, dim, k)
+        };
         if s.is_nan() || s <= 0.0 || s >= THIN_BELOW * trained {
             break;
         }
@@ -174,6 +227,27 @@ mod tests {
         // No trained spacing, or a degenerate one: read whole.
         assert_eq!(thin(&dense, 2, 4, 0.0, 7), None);
         assert_eq!(thin(&dense, 2, 4, f64::NAN, 7), None);
+    }
+
+    #[test]
+    fn a_much_sparser_set_goes_to_the_sparse_network_where_there_is_one() {
+        let trained = spacing(&circle(100), 2, 4);
+        let read = |m: usize, above: Option<f64>| reading(&circle(m), 2, 4, trained, above, 7);
+        // 40 points: spacing 2.5 x training's.
+        assert_eq!(read(40, Some(1.05)), Reading::Sparse);
+        assert_eq!(read(40, Some(3.0)), Reading::Whole);
+        assert_eq!(read(40, None), Reading::Whole);
+        // At the training density, or within the threshold: whole, by the card's networks.
+        assert_eq!(read(100, Some(1.05)), Reading::Whole);
+        assert_eq!(read(90, Some(1.2)), Reading::Whole);
+        // Denser: thinned exactly as `thin` does, whatever the threshold.
+        let thinned = thin(&circle(400), 2, 4, trained, 7).unwrap();
+        assert_eq!(read(400, Some(1.05)), Reading::Thinned(thinned));
+        // No training spacing: whole.
+        assert_eq!(
+            reading(&circle(40), 2, 4, 0.0, Some(1.05), 7),
+            Reading::Whole
+        );
     }
 
     #[test]

@@ -41,10 +41,14 @@ pub enum CardError {
     FixedSelection,
     #[error("test_symmetries: {0}")]
     TestSymmetries(SymmetryError),
-    #[error("members: weights {0:?} must be a plain .safetensors file name")]
-    MemberFile(String),
-    #[error("members: weights {0:?} named twice")]
-    MemberTwice(String),
+    #[error("weights {0:?} (members, sparse) must be a plain .safetensors file name")]
+    WeightsFile(String),
+    #[error("weights {0:?} (members, sparse) named twice")]
+    WeightsTwice(String),
+    #[error("sparse: needs the card's training spacing")]
+    SparseWithoutSpacing,
+    #[error("sparse: above must be a finite ratio of at least 1, got {0}")]
+    SparseAbove(f64),
     #[error(transparent)]
     Architecture(ModelError),
 }
@@ -79,6 +83,19 @@ pub struct MetricRecord {
 pub struct Member {
     /// Its weights file, a plain file name inside the model directory.
     pub weights: String,
+    pub loss: Loss,
+    pub training: TrainingInfo,
+}
+
+/// A network for sets sparser than the card's training sets: a set whose spacing exceeds
+/// `above` × the card's `spacing` is embedded by this network instead of the card's own (and its
+/// members'). Same architecture, input and normalisation as the card's network.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SparseNetwork {
+    /// Its weights file, a plain file name inside the model directory.
+    pub weights: String,
+    /// The spacing ratio (set's over training's) above which it reads the set.
+    pub above: f64,
     pub loss: Loss,
     pub training: TrainingInfo,
 }
@@ -131,6 +148,10 @@ pub struct ModelCard {
     /// subset of this density ([`crate::data::density`]). `None`: every set is read whole.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub spacing: Option<f64>,
+    /// The network that reads sets sparser than training ([`SparseNetwork`]); `None`: the
+    /// card's networks read every set.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sparse: Option<SparseNetwork>,
     /// The range of inputs the model was validated on; a fit outside it answers with warnings.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub validated: Option<ValidatedRange>,
@@ -275,10 +296,18 @@ impl ModelCard {
         for (i, file) in files.iter().enumerate().skip(1) {
             let plain = Path::new(file).file_name() == Some(file.as_ref());
             if !plain || !file.ends_with(".safetensors") {
-                return Err(CardError::MemberFile(file.to_string()));
+                return Err(CardError::WeightsFile(file.to_string()));
             }
             if files[..i].contains(file) {
-                return Err(CardError::MemberTwice(file.to_string()));
+                return Err(CardError::WeightsTwice(file.to_string()));
+            }
+        }
+        if let Some(sparse) = &self.sparse {
+            if self.spacing.is_none() {
+                return Err(CardError::SparseWithoutSpacing);
+            }
+            if !(sparse.above.is_finite() && sparse.above >= 1.0) {
+                return Err(CardError::SparseAbove(sparse.above));
             }
         }
         self.architecture
@@ -287,9 +316,11 @@ impl ModelCard {
     }
 
     /// The weight files of the model's networks, relative to its directory: the card's own
-    /// network ([`WEIGHTS_FILE`]) first, then each member's.
+    /// network ([`WEIGHTS_FILE`]) first, then each member's, then the sparse network's.
     pub fn weight_files(&self) -> impl Iterator<Item = &str> {
-        std::iter::once(WEIGHTS_FILE).chain(self.members.iter().map(|m| m.weights.as_str()))
+        std::iter::once(WEIGHTS_FILE)
+            .chain(self.members.iter().map(|m| m.weights.as_str()))
+            .chain(self.sparse.iter().map(|s| s.weights.as_str()))
     }
 
     pub fn read(dir: &Path) -> Result<Self, RegistryError> {
@@ -344,6 +375,7 @@ pub fn card_for(
         outliers: true,
         geometry: None,
         spacing: None,
+        sparse: None,
         validated: None,
         metrics: vec![],
         multifit_version: env!("CARGO_PKG_VERSION").into(),

@@ -1,9 +1,12 @@
-//! Ensembles: several trained networks of one architecture joined into one model directory,
-//! written atomically (staged beside the target, loaded to check it, then renamed into place).
+//! Models of several networks of one architecture, written as one model directory atomically
+//! (staged beside the target, loaded to check it, then renamed into place): ensembles, whose
+//! networks all embed every set, and a model with a network for sets sparser than training.
 
 use std::path::{Path, PathBuf};
 
-use super::{CARD_FILE, LoadedModel, Member, ModelCard, RegistryError, WEIGHTS_FILE};
+use super::{
+    CARD_FILE, LoadedModel, Member, ModelCard, RegistryError, SparseNetwork, WEIGHTS_FILE,
+};
 
 /// Writes to `out` a model named `name` that embeds with every model in `dirs` (an ensemble):
 /// the first model's card and weights, and the others as its members (`weights-<i>.safetensors`).
@@ -32,29 +35,7 @@ pub fn write_ensemble(
     let out_path = out.canonicalize().ok();
     let mut seen = Vec::new();
     for (dir, card) in dirs.iter().zip(&cards) {
-        if !card.members.is_empty() {
-            return Err(fail(format!("{} is itself an ensemble", dir.display())));
-        }
-        let same = (
-            card.kind,
-            card.input_dim,
-            card.normalization,
-            &card.architecture,
-            &card.test_symmetries,
-        ) == (
-            first.kind,
-            first.input_dim,
-            first.normalization,
-            &first.architecture,
-            &first.test_symmetries,
-        );
-        if !same {
-            return Err(fail(format!(
-                "{} differs from {} in kind, input, normalisation, architecture or test symmetries",
-                dir.display(),
-                dirs[0].display()
-            )));
-        }
+        single_like(card, dir, first, &dirs[0])?;
         let path = dir.canonicalize().ok();
         if path.is_some() && path == out_path {
             return Err(fail(format!(
@@ -79,6 +60,86 @@ pub fn write_ensemble(
             training: c.training.clone(),
         })
         .collect();
+    let sources: Vec<PathBuf> = dirs.iter().map(|d| d.join(WEIGHTS_FILE)).collect();
+    install(card, &sources, out)
+}
+
+/// The weights file of a model's network for sparse sets.
+pub const SPARSE_WEIGHTS_FILE: &str = "weights-sparse.safetensors";
+
+/// Writes to `out` the model in `base` with the single network of the model in `sparse` as its
+/// network for sets whose spacing exceeds `above` × `base`'s training spacing
+/// ([`crate::registry::SparseNetwork`]; one it had is replaced). The two must share kind,
+/// input, normalisation, architecture and test symmetries, and `base` must record its training
+/// spacing. `base`'s name, metrics and defaults are kept. Written as [`write_ensemble`] writes.
+pub fn write_sparse(
+    base: &Path,
+    sparse: &Path,
+    above: f64,
+    out: &Path,
+) -> Result<ModelCard, RegistryError> {
+    let (mut card, extra) = (ModelCard::read(base)?, ModelCard::read(sparse)?);
+    single_like(&extra, sparse, &card, base)?;
+    let out_path = out.canonicalize().ok();
+    for dir in [base, sparse] {
+        if out_path.is_some() && dir.canonicalize().ok() == out_path {
+            return Err(RegistryError::Ensemble(format!(
+                "{} is both an input and the output",
+                dir.display()
+            )));
+        }
+    }
+    card.sparse = Some(SparseNetwork {
+        weights: SPARSE_WEIGHTS_FILE.into(),
+        above,
+        loss: extra.loss,
+        training: extra.training,
+    });
+    let mut sources: Vec<PathBuf> = card.weight_files().map(|file| base.join(file)).collect();
+    *sources.last_mut().expect("the sparse network's file") = sparse.join(WEIGHTS_FILE);
+    install(card, &sources, out)
+}
+
+/// Checks that the model in `dir` (`card`) is a single network that `first` (in `first_dir`)
+/// could carry beside its own: same kind, input, normalisation, architecture and symmetries.
+fn single_like(
+    card: &ModelCard,
+    dir: &Path,
+    first: &ModelCard,
+    first_dir: &Path,
+) -> Result<(), RegistryError> {
+    let fail = |reason: String| Err(RegistryError::Ensemble(reason));
+    if !card.members.is_empty() || card.sparse.is_some() {
+        return fail(format!(
+            "{} is itself several networks (an ensemble or one with a sparse network)",
+            dir.display()
+        ));
+    }
+    let key = |c: &ModelCard| {
+        (
+            c.kind,
+            c.input_dim,
+            c.normalization,
+            c.architecture.clone(),
+            c.test_symmetries.clone(),
+        )
+    };
+    if key(card) != key(first) {
+        return fail(format!(
+            "{} differs from {} in kind, input, normalisation, architecture or test symmetries",
+            dir.display(),
+            first_dir.display()
+        ));
+    }
+    Ok(())
+}
+
+/// Writes `card` and its weight files, copied from `sources` (one per
+/// [`ModelCard::weight_files`], in order), as the model directory `out`: staged beside it,
+/// loaded to check it, then renamed into place (`out` must be absent, empty or a model
+/// directory).
+fn install(card: ModelCard, sources: &[PathBuf], out: &Path) -> Result<ModelCard, RegistryError> {
+    let fail = |reason: String| RegistryError::Ensemble(reason);
     card.validate().map_err(|e| RegistryError::Card {
         path: out.join(CARD_FILE),
         reason: e.to_string(),
@@ -100,10 +161,9 @@ pub fn write_ensemble(
     let staging = sibling(out, "partial");
     let _ = std::fs::remove_dir_all(&staging);
     std::fs::create_dir_all(&staging).map_err(io(&staging))?;
-    for (dir, file) in dirs.iter().zip(card.weight_files()) {
+    for (from, file) in sources.iter().zip(card.weight_files()) {
         // Read and write rather than copy: a copy would keep the source's permissions.
-        let from = dir.join(WEIGHTS_FILE);
-        let bytes = std::fs::read(&from).map_err(io(&from))?;
+        let bytes = std::fs::read(from).map_err(io(from))?;
         std::fs::write(staging.join(file), bytes).map_err(io(&staging.join(file)))?;
     }
     card.write(&staging).map_err(io(&staging.join(CARD_FILE)))?;
@@ -133,11 +193,15 @@ fn sibling(dir: &Path, tag: &str) -> PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::data::Kind;
     use crate::data::Symmetry;
+    use crate::data::density::spacing;
     use crate::loss::Loss;
     use crate::model::cpu_device;
     use crate::pipeline::tests::ten_tracks;
-    use crate::registry::tests::{save, scratch, tiny, tiny_seeded, two_saved_models};
+    use crate::registry::tests::{
+        save, scratch, tiny, tiny_reading, tiny_seeded, two_saved_models,
+    };
 
     #[test]
     fn an_ensemble_sets_every_network_of_every_image_side_by_side() {
@@ -228,6 +292,21 @@ mod tests {
         );
         card.members = vec![member("w1.safetensors"), member("w2.safetensors")];
         card.validate().unwrap();
+        // The sparse network's file too.
+        card.spacing = Some(0.3);
+        for (bad, why) in [
+            ("w2.safetensors", "named twice"),
+            ("../s.safetensors", "plain"),
+        ] {
+            card.sparse = Some(SparseNetwork {
+                weights: bad.into(),
+                above: 1.5,
+                loss: Loss::L2,
+                training: card.training.clone(),
+            });
+            let err = card.validate().unwrap_err().to_string();
+            assert!(err.contains(why), "{bad}: {err}");
+        }
     }
 
     #[test]
@@ -266,7 +345,7 @@ mod tests {
         LoadedModel::load(&out).unwrap();
         // An ensemble is not a member of another.
         let err = refuse(&[out.clone(), dirs[0].clone()], &tmp.path().join("f"));
-        assert!(err.to_string().contains("itself an ensemble"), "{err}");
+        assert!(err.to_string().contains("itself several networks"), "{err}");
 
         // A member whose weights do not load leaves the existing model untouched.
         let before = std::fs::read(out.join(WEIGHTS_FILE)).unwrap();
@@ -301,5 +380,87 @@ mod tests {
                 "{file}, not the source's 600"
             );
         }
+    }
+
+    /// `dirs[0]`'s card with `spacing` as its training spacing, written back.
+    fn record_spacing(dir: &Path, spacing: Option<f64>) {
+        let mut card = ModelCard::read(dir).unwrap();
+        card.spacing = spacing;
+        card.write(dir).unwrap();
+    }
+
+    #[test]
+    fn a_set_sparser_than_training_is_read_by_the_sparse_network_alone() {
+        let tmp = scratch("sparse");
+        // Two networks that read each track's 2 nearest others, as spacing needs.
+        let (a, b) = (
+            tiny_reading("a", Kind::Trajectories, 4, 7, 2),
+            tiny_reading("b", Kind::Trajectories, 4, 8, 2),
+        );
+        let dirs = [tmp.path().join("a"), tmp.path().join("b")];
+        save(&a, &dirs[0]);
+        save(&b, &dirs[1]);
+        let (points, image, params) = ten_tracks(5, 11);
+        let normalised = a.card.normalization.apply(&points, image);
+        let s = spacing(&normalised, points.dim(), a.card.architecture.neighbors);
+        assert!(s > 0.0);
+        record_spacing(&dirs[0], Some(s));
+        let out = tmp.path().join("sparse");
+        let card = write_sparse(&dirs[0], &dirs[1], 1.5, &out).unwrap();
+        let sparse = card.sparse.as_ref().unwrap();
+        assert_eq!(
+            (sparse.weights.as_str(), sparse.above),
+            (SPARSE_WEIGHTS_FILE, 1.5)
+        );
+        assert_eq!(sparse.training.seed, 8);
+        assert_eq!(card.weight_files().last(), Some(SPARSE_WEIGHTS_FILE));
+        let mut model = LoadedModel::load(&out).unwrap();
+        assert_eq!(model.card, card);
+
+        // At the training spacing: the card's own network.
+        let (za, zb) = (
+            a.fit(&points, image, &params).unwrap().embeddings,
+            b.fit(&points, image, &params).unwrap().embeddings,
+        );
+        assert_ne!(za, zb);
+        let fit = model.fit(&points, image, &params).unwrap();
+        assert_eq!((fit.embed_dim, &fit.embeddings), (3, &za));
+        // Twice as sparse as training (beyond 1.5 x): the sparse network alone.
+        model.card.spacing = Some(s / 2.0);
+        let fit = model.fit(&points, image, &params).unwrap();
+        assert_eq!((fit.embed_dim, &fit.embeddings), (3, &zb));
+        // Only from its directory.
+        let err = LoadedModel::from_parts(card, a.net.clone(), cpu_device()).unwrap_err();
+        assert!(err.to_string().contains("network for sparse sets"), "{err}");
+    }
+
+    #[test]
+    fn a_sparse_network_needs_a_spacing_a_single_like_network_and_another_output() {
+        let tmp = scratch("sparse-refusals");
+        let (_, _, dirs) = two_saved_models(&tmp);
+        let out = tmp.path().join("s");
+        let refuse = |base: &Path, net: &Path, above: f64, out: &Path| {
+            write_sparse(base, net, above, out).unwrap_err().to_string()
+        };
+        let err = refuse(&dirs[0], &dirs[1], 1.5, &out);
+        assert!(err.contains("needs the card's training spacing"), "{err}");
+        record_spacing(&dirs[0], Some(0.3));
+        for above in [0.5, f64::NAN, f64::INFINITY] {
+            let err = refuse(&dirs[0], &dirs[1], above, &out);
+            assert!(err.contains("finite ratio of at least 1"), "{above}: {err}");
+        }
+        let err = refuse(&dirs[0], &dirs[1], 1.5, &dirs[0]);
+        assert!(err.contains("both an input and the output"), "{err}");
+        let mut wider = tiny(vec![]);
+        wider.card.architecture.width = 16;
+        let w = tmp.path().join("w");
+        save(&wider, &w);
+        let err = refuse(&dirs[0], &w, 1.5, &out);
+        assert!(err.contains("architecture"), "{err}");
+        // A model that already has a sparse network is not one.
+        write_sparse(&dirs[0], &dirs[1], 1.5, &out).unwrap();
+        let err = refuse(&dirs[0], &out, 1.5, &tmp.path().join("t"));
+        assert!(err.contains("itself several networks"), "{err}");
+        assert!(!out.join("weights-1.safetensors").exists());
     }
 }

@@ -18,6 +18,8 @@ pub struct LoadedModel {
     fused: FusedNet,
     /// The fused forwards of the card's further networks, in the card's order.
     members: Vec<FusedNet>,
+    /// The fused forward of the card's network for sparse sets.
+    sparse: Option<FusedNet>,
     /// Threads one fit may use.
     threads: Threads,
     device: Device,
@@ -32,23 +34,31 @@ impl LoadedModel {
         let card = ModelCard::read(dir)?;
         let device = cpu_device();
         let net = EmbeddingNet::load(&card.architecture, &dir.join(WEIGHTS_FILE), &device)?;
+        let fused = |file: &str| {
+            let net = EmbeddingNet::load(&card.architecture, &dir.join(file), &device)?;
+            FusedNet::from_net(&net)
+        };
         let members = card
-            .weight_files()
-            .skip(1)
-            .map(|file| {
-                let net = EmbeddingNet::load(&card.architecture, &dir.join(file), &device)?;
-                FusedNet::from_net(&net)
-            })
+            .members
+            .iter()
+            .map(|m| fused(&m.weights))
             .collect::<Result<Vec<_>, _>>()?;
+        let sparse = card
+            .sparse
+            .as_ref()
+            .map(|s| fused(&s.weights))
+            .transpose()?;
         let weights_sha256 = weights_sha256(dir, &card)?;
         let mut model = Self::assemble(card, net, device)?;
         model.members = members;
+        model.sparse = sparse;
         model.weights_sha256 = Some(weights_sha256);
         Ok(model)
     }
 
     /// Hex SHA-256 of the weight files the model was loaded from, concatenated in the card's
-    /// order (`cat weights.safetensors weights-1.safetensors ... | sha256sum`): the identity of
+    /// order (`cat weights.safetensors weights-1.safetensors ... weights-sparse.safetensors |
+    /// sha256sum`): the identity of
     /// exactly these weights, which the card's `version` is not. `None` for a network built in
     /// this process ([`LoadedModel::from_parts`]). The files are read again for the digest after
     /// the networks are built: replace a model directory while no server is loading it.
@@ -58,7 +68,8 @@ impl LoadedModel {
 
     /// Wraps a freshly trained network. Fits run on the calling thread until
     /// [`LoadedModel::with_threads`] says otherwise.
-    /// A card with `members` needs their weights: load it with [`LoadedModel::load`].
+    /// A card with `members` or a `sparse` network needs their weights: load it with
+    /// [`LoadedModel::load`].
     pub fn from_parts(
         card: ModelCard,
         net: EmbeddingNet,
@@ -71,6 +82,12 @@ impl LoadedModel {
                 card.members.len() + 1
             )));
         }
+        if card.sparse.is_some() {
+            return Err(ModelError::Config(format!(
+                "model {} has a network for sparse sets: load it from its directory",
+                card.name
+            )));
+        }
         Self::assemble(card, net, device)
     }
 
@@ -81,6 +98,7 @@ impl LoadedModel {
             net,
             fused,
             members: Vec::new(),
+            sparse: None,
             threads: Threads::default(),
             device,
             weights_sha256: None,
@@ -115,9 +133,13 @@ impl LoadedModel {
     }
 
     /// Network input for `points` (normalised, neighbour offsets appended), checking kind and
-    /// Embeddings of network input by the fused forward of every network of the model, the
-    /// card's own first, then its members': features `[n, feature_dim]` -> one `[n, e]` each.
-    pub fn embed_all(&self, features: &[f32]) -> Vec<Vec<f32>> {
+    /// Embeddings of network input by the fused forward of every network that reads it: the
+    /// card's own first, then its members'; for a `sparse` set the card's sparse network
+    /// alone, where it has one: features `[n, feature_dim]` -> one `[n, e]` each.
+    pub fn embed_all(&self, features: &[f32], sparse: bool) -> Vec<Vec<f32>> {
+        if let (true, Some(net)) = (sparse, &self.sparse) {
+            return vec![net.forward(features, &self.threads)];
+        }
         std::iter::once(&self.fused)
             .chain(&self.members)
             .map(|net| net.forward(features, &self.threads))

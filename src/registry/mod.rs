@@ -12,10 +12,10 @@ use std::path::PathBuf;
 use crate::model::ModelError;
 
 pub use card::{
-    CARD_FILE, CardError, Member, MetricRecord, ModelCard, Observed, TrainingInfo, ValidatedRange,
-    WEIGHTS_FILE, card_for,
+    CARD_FILE, CardError, Member, MetricRecord, ModelCard, Observed, SparseNetwork, TrainingInfo,
+    ValidatedRange, WEIGHTS_FILE, card_for,
 };
-pub use ensemble::write_ensemble;
+pub use ensemble::{SPARSE_WEIGHTS_FILE, write_ensemble, write_sparse};
 pub use load::{LoadedModel, load_all};
 
 /// Why a model directory cannot be served.
@@ -64,6 +64,17 @@ pub(crate) mod tests {
     /// A one-block network named `name` for `kind` on rows of `input_dim` values, embedding in
     /// 3 dimensions, initialised from `seed`.
     pub(crate) fn tiny_model(name: &str, kind: Kind, input_dim: usize, seed: u64) -> LoadedModel {
+        tiny_reading(name, kind, input_dim, seed, 0)
+    }
+
+    /// [`tiny_model`] reading each point's `neighbors` nearest others too.
+    pub(crate) fn tiny_reading(
+        name: &str,
+        kind: Kind,
+        input_dim: usize,
+        seed: u64,
+        neighbors: usize,
+    ) -> LoadedModel {
         let model = ModelConfig {
             input_dim,
             width: 8,
@@ -71,7 +82,7 @@ pub(crate) mod tests {
             embed_dim: 3,
             batch_norm: false,
             cn_epsilon: 1e-3,
-            neighbors: 0,
+            neighbors,
             graph_neighbors: 0,
         };
         let device = cpu_device();

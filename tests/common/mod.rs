@@ -290,12 +290,16 @@ pub fn shipped_weights_sha256(name: &str) -> String {
     let dir = repo().join("models").join(name);
     let card: Value =
         serde_json::from_slice(&std::fs::read(dir.join("model.json")).unwrap()).unwrap();
+    // The card's order: its own network, its members', its network for sparse sets.
     let members = card["members"].as_array().cloned().unwrap_or_default();
-    let files = std::iter::once(multifit::registry::WEIGHTS_FILE.to_string()).chain(
-        members
-            .iter()
-            .map(|m| m["weights"].as_str().unwrap().to_string()),
-    );
+    let sparse = card.get("sparse").cloned();
+    let files = std::iter::once(multifit::registry::WEIGHTS_FILE.to_string())
+        .chain(
+            members
+                .iter()
+                .map(|m| m["weights"].as_str().unwrap().to_string()),
+        )
+        .chain(sparse.map(|s| s["weights"].as_str().unwrap().to_string()));
     let mut hasher = Sha256::new();
     for file in files {
         hasher.update(std::fs::read(dir.join(file)).unwrap());

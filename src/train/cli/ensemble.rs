@@ -1,11 +1,13 @@
 //! `ensemble`: trained models of one architecture combined into one model directory whose fits
-//! cluster all their embeddings side by side ([`crate::registry::write_ensemble`]).
+//! cluster all their embeddings side by side ([`crate::registry::write_ensemble`]); `sparse`: a
+//! model given a second network for the sets sparser than its training sets
+//! ([`crate::registry::write_sparse`]).
 
 use std::fmt;
 use std::path::{Path, PathBuf};
 
 use super::CliError;
-use crate::registry::write_ensemble;
+use crate::registry::{write_ensemble, write_sparse};
 
 /// What [`run`] wrote.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -44,6 +46,21 @@ pub fn run(models: &[PathBuf], out: &Path, name: Option<&str>) -> Result<Written
     Ok(Written {
         out: out.to_path_buf(),
         networks: card.members.len() + 1,
+    })
+}
+
+/// Writes to `out` the model in `model` with the network in `network` for the sets whose
+/// spacing exceeds `above` × its training spacing.
+pub fn run_sparse(
+    model: &Path,
+    network: &Path,
+    above: f64,
+    out: &Path,
+) -> Result<Written, CliError> {
+    let card = write_sparse(model, network, above, out)?;
+    Ok(Written {
+        out: out.to_path_buf(),
+        networks: card.weight_files().count(),
     })
 }
 
