@@ -224,7 +224,7 @@ fn main() {
     if wanted("refine") {
         // Refinement at N = 1000, started from the true groups (the reassignment rounds and every
         // refit run as in a fit): 4 LCE shapes of 250 points; 4 planes of correspondences; 4 motions
-        // of 20-frame tracks.
+        // of 20-frame tracks; and 3 motions of 100 tracks of 100 frames (N = 300).
         let mut lce = LceGenerator::new(
             5,
             LceConfig {
@@ -251,24 +251,29 @@ fn main() {
                 ]
             })
             .collect();
-        let tracks: Vec<Vec<f64>> = (0..1000)
-            .map(|i| {
-                let g = (i % 4) as f64;
-                let r = pseudo(3, i + 5000);
-                let (x, y, z) = (
-                    f64::from(r[0]) * 5.0,
-                    f64::from(r[1]) * 5.0,
-                    f64::from(r[2]) + 10.0,
-                );
-                (0..20)
-                    .flat_map(|f| {
-                        let (a, t) = (0.01 * f as f64 * (g + 1.0), 0.2 * f as f64 * g);
-                        let (xr, zr) = (x * a.cos() + z * a.sin() + t, -x * a.sin() + z * a.cos());
-                        [500.0 * xr / zr + 600.0, 500.0 * y / zr + 200.0]
-                    })
-                    .collect()
-            })
-            .collect();
+        // `n` tracks of `frames` frames, `motions` rigid motions seen by a perspective camera,
+        // track i following motion i % motions.
+        let tracks = |n: usize, frames: usize, motions: usize| -> Vec<Vec<f64>> {
+            (0..n)
+                .map(|i| {
+                    let g = (i % motions) as f64;
+                    let r = pseudo(3, i + 5000);
+                    let (x, y, z) = (
+                        f64::from(r[0]) * 5.0,
+                        f64::from(r[1]) * 5.0,
+                        f64::from(r[2]) + 10.0,
+                    );
+                    (0..frames)
+                        .flat_map(|f| {
+                            let (a, t) = (0.01 * f as f64 * (g + 1.0), 0.2 * f as f64 * g);
+                            let (xr, zr) =
+                                (x * a.cos() + z * a.sin() + t, -x * a.sin() + z * a.cos());
+                            [500.0 * xr / zr + 600.0, 500.0 * y / zr + 200.0]
+                        })
+                        .collect()
+                })
+                .collect()
+        };
         let sets = [
             (
                 "lce shapes, curves",
@@ -284,8 +289,15 @@ fn main() {
             ),
             (
                 "20-frame tracks, subspace",
-                PointSet::from_rows(Kind::Trajectories, &tracks).expect("points"),
+                PointSet::from_rows(Kind::Trajectories, &tracks(1000, 20, 4)).expect("points"),
                 (0..1000).map(|i| i % 4).collect(),
+                Family::Subspace,
+            ),
+            // Long tracks, fewer per motion than coordinates (2F = 200): Gram matrices.
+            (
+                "100-frame tracks, subspace",
+                PointSet::from_rows(Kind::Trajectories, &tracks(300, 100, 3)).expect("points"),
+                (0..300).map(|i| i % 3).collect(),
                 Family::Subspace,
             ),
         ];

@@ -1,5 +1,5 @@
-//! Small dense linear algebra, hand-written in f64: what the estimators of this module need and
-//! nothing more.
+//! Small dense linear algebra in f64, hand-written but for the matrix products of large Gram
+//! matrices: what the estimators of this module need and nothing more.
 //!
 //! Matrices are row-major slices (`a[i * cols + j]`); 3 × 3 matrices are `[f64; 9]`.
 //!
@@ -9,9 +9,37 @@
 //! | [`svd`] | one-sided Jacobi (Hestenes), m ≥ n | the rank-2 projection of F |
 //! | [`null_vector`] | eigenvector of AᵀA for its smallest eigenvalue | the (normalised) DLT and 8-point systems A·h = 0 |
 //! | [`solve`] | Gaussian elimination, partial pivoting | normal equations (Kåsa, Levenberg–Marquardt) |
+//! | [`outer_gram`], [`inner_gram`] | A·Aᵀ and Aᵀ·A by matrixmultiply's dgemm (through ndarray) | the scatter and Gram matrices of motion subspaces |
 //!
 //! Everything here is deterministic and never panics on finite input; singular systems answer
 //! `None`.
+
+/// A·Aᵀ of the m × d row-major matrix `a`: m × m, row-major, symmetric.
+pub fn outer_gram(a: &[f64], m: usize, d: usize) -> Vec<f64> {
+    let view = ndarray::ArrayView2::from_shape((m, d), a).expect("outer_gram: bad shape");
+    let mut out = ndarray::Array2::<f64>::zeros((m, m));
+    ndarray::linalg::general_mat_mul(1.0, &view, &view.t(), 0.0, &mut out);
+    symmetric(out.into_raw_vec_and_offset().0, m)
+}
+
+/// Aᵀ·A of the m × d row-major matrix `a`: d × d, row-major, symmetric.
+pub fn inner_gram(a: &[f64], m: usize, d: usize) -> Vec<f64> {
+    let view = ndarray::ArrayView2::from_shape((m, d), a).expect("inner_gram: bad shape");
+    let mut out = ndarray::Array2::<f64>::zeros((d, d));
+    ndarray::linalg::general_mat_mul(1.0, &view.t(), &view, 0.0, &mut out);
+    symmetric(out.into_raw_vec_and_offset().0, d)
+}
+
+/// The n × n matrix `s` made exactly symmetric (its lower triangle copied up): a product's two
+/// triangles may differ in round-off.
+fn symmetric(mut s: Vec<f64>, n: usize) -> Vec<f64> {
+    for i in 0..n {
+        for j in 0..i {
+            s[j * n + i] = s[i * n + j];
+        }
+    }
+    s
+}
 
 /// A 3 × 3 matrix, row-major.
 pub type Mat3 = [f64; 9];
@@ -365,16 +393,14 @@ pub fn top_eigen(s: &[f64], d: usize, r: usize) -> (Vec<f64>, Vec<Vec<f64>>) {
     if r == 0 {
         return (Vec::new(), Vec::new());
     }
-    let mat_vec = |v: &[f64]| -> Vec<f64> {
-        (0..d)
-            .map(|i| {
-                s[i * d..(i + 1) * d]
-                    .iter()
-                    .zip(v)
-                    .map(|(a, b)| a * b)
-                    .sum()
-            })
-            .collect()
+    // S·v for each vector v of a block, as one product V·S (S is symmetric).
+    let sv = ndarray::ArrayView2::from_shape((d, d), s).expect("top_eigen: bad shape");
+    let times = |v: &[Vec<f64>]| -> Vec<Vec<f64>> {
+        let flat: Vec<f64> = v.iter().flatten().copied().collect();
+        let block = ndarray::ArrayView2::from_shape((v.len(), d), &flat).expect("block");
+        let mut out = ndarray::Array2::<f64>::zeros((v.len(), d));
+        ndarray::linalg::general_mat_mul(1.0, &block, &sv, 0.0, &mut out);
+        out.rows().into_iter().map(|row| row.to_vec()).collect()
     };
     // Start: the columns of S (= S·eᵢ) of largest norm, then the unit vectors, orthonormalised.
     let mut order: Vec<usize> = (0..d).collect();
@@ -389,7 +415,7 @@ pub fn top_eigen(s: &[f64], d: usize, r: usize) -> (Vec<f64>, Vec<Vec<f64>>) {
     let mut v = orthonormal_basis(candidates, r);
     let mut t = vec![0.0; r * r];
     for _ in 0..60 {
-        let w: Vec<Vec<f64>> = v.iter().map(|x| mat_vec(x)).collect();
+        let w = times(&v);
         // T = Vᵀ S V and the residual S V − V T.
         for a in 0..r {
             for b in 0..r {
@@ -411,7 +437,7 @@ pub fn top_eigen(s: &[f64], d: usize, r: usize) -> (Vec<f64>, Vec<Vec<f64>>) {
         v = next;
     }
     // Rayleigh–Ritz: rotate V by the eigenvectors of T (recomputed for the final V).
-    let w: Vec<Vec<f64>> = v.iter().map(|x| mat_vec(x)).collect();
+    let w = times(&v);
     for a in 0..r {
         for b in 0..r {
             t[a * r + b] = 0.5
@@ -709,6 +735,32 @@ mod tests {
                         .sum();
                     let want = if i == j { 1.0 } else { 0.0 };
                     assert!((dot - want).abs() < 1e-12, "n={n} orthonormal");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn gram_products_match_the_triple_loop() {
+        let mut rng = Rng::new(6);
+        for (m, d) in [(1, 1), (3, 7), (40, 9), (17, 120)] {
+            let a = random_matrix(&mut rng, m, d);
+            let (outer, inner) = (outer_gram(&a, m, d), inner_gram(&a, m, d));
+            for (n, got, at) in [
+                (
+                    m,
+                    &outer,
+                    &(|i: usize, k: usize| a[i * d + k]) as &dyn Fn(usize, usize) -> f64,
+                ),
+                (d, &inner, &|i: usize, k: usize| a[k * d + i]),
+            ] {
+                let len = if n == m { d } else { m };
+                for i in 0..n {
+                    for j in 0..n {
+                        let want: f64 = (0..len).map(|k| at(i, k) * at(j, k)).sum();
+                        assert!((got[i * n + j] - want).abs() < 1e-12 * (1.0 + want.abs()));
+                        assert_eq!(got[i * n + j], got[j * n + i]);
+                    }
                 }
             }
         }
