@@ -154,6 +154,19 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         grid 1 71 models/lce
         grid 2 72 runs/lce-grid-g1/model
         grid 3 73 runs/lce-grid-g2/model
+        # Stage 42's card has no serving settings: the training spacing, refinement, outliers and
+        # validated range were set on the shipped card after training (docs/RESULTS.md, "Robustness
+        # grid"); copy them from the card in git before joining the network for sparse sets.
+        git show HEAD:models/lce/model.json > runs/lce-shipped-card.json
+        python3 - <<'PY'
+import json
+shipped = json.load(open("runs/lce-shipped-card.json"))
+card = json.load(open("models/lce/model.json"))
+for key in ("spacing", "refine", "outliers", "validated"):
+    if key in shipped:
+        card[key] = shipped[key]
+json.dump(card, open("models/lce/model.json", "w"), indent=2)
+PY
         $T sparse --model models/lce --network runs/lce-grid-g3/model --above 1.25 --out runs/lce-sparse
         rm -rf models/lce && mv runs/lce-sparse models/lce ;;
       *) echo "unknown model $m" >&2; exit 2 ;;

@@ -8,7 +8,9 @@
 //!    network for sparse sets where it has one ([`crate::data::density`]).
 //! 2. **features** ([`network_input`]): the offsets to each point's nearest neighbours. Training
 //!    builds its input with the same function, so training and serving cannot drift apart.
-//! 3. **embed** ([`embed`]): every network of the model on the input and on its images under the
+//! 3. **embed** ([`embed`]): every network of the model that reads the set (the card's and its
+//!    members', or for a much sparser set its network for sparse sets) on the input and on its
+//!    images under the
 //!    card's test-time symmetries; each point's unit embeddings side by side, scaled to unit
 //!    length.
 //! 4. **cluster** ([`cluster`]): k-means on the embeddings, K given or chosen from the residual

@@ -70,8 +70,8 @@ pub enum Reading {
 }
 
 /// How a model trained at spacing `trained` with `k` neighbours reads `points` `[n, dim]`:
-/// by its network for sparse sets when the set's spacing exceeds `sparse_above` × `trained`
-/// (cards with such a network), else thinned ([`thin`]) or whole.
+/// by its network for sparse sets when the set's spacing exceeds `sparse_above` × `trained`, or
+/// it has no more than k points (cards with such a network), else thinned ([`thin`]) or whole.
 pub fn reading(
     points: &[f32],
     dim: usize,
@@ -82,6 +82,11 @@ pub fn reading(
 ) -> Reading {
     if trained.is_nan() || trained <= 0.0 {
         return Reading::Whole;
+    }
+    // No k-th neighbour: sparser than any spacing.
+    let n = points.len() / dim.max(1);
+    if sparse_above.is_some() && k > 0 && n <= k {
+        return Reading::Sparse;
     }
     let s = spacing(points, dim, k);
     if sparse_above.is_some_and(|above| s > above * trained) {
@@ -248,6 +253,9 @@ mod tests {
             reading(&circle(40), 2, 4, 0.0, Some(1.05), 7),
             Reading::Whole
         );
+        // Too few points to have a k-th neighbour: sparser than any threshold.
+        assert_eq!(read(4, Some(3.0)), Reading::Sparse);
+        assert_eq!(read(4, None), Reading::Whole);
     }
 
     #[test]

@@ -240,28 +240,9 @@ fn principal(
     }
     let m = active.len();
     let (values, basis): (Vec<f64>, Vec<Vec<f64>>) = if m >= d {
-        let scatter = inner_gram(&flat, m, d);
-        if d > FULL_EIGEN_MAX {
-            // Only the top directions are needed: orthogonal iteration on the full matrix.
-            top_eigen(&scatter, d, max_rank.min(d))
-        } else {
-            let e = sym_eigen(&scatter, d);
-            let values: Vec<f64> = e.values.iter().rev().map(|v| v.max(0.0)).collect();
-            let basis = (0..max_rank.min(d)).map(|k| e.vector(d - 1 - k)).collect();
-            (values, basis)
-        }
+        top_directions(&inner_gram(&flat, m, d), d, max_rank)
     } else {
-        let gram = outer_gram(&flat, m, d);
-        let (values, vectors) = if m > FULL_EIGEN_MAX {
-            // As for a large scatter: only the top directions, by orthogonal iteration (a full
-            // decomposition of a Gram matrix of a few hundred tracks costs O(m³) per fit).
-            top_eigen(&gram, m, max_rank.min(m))
-        } else {
-            let e = sym_eigen(&gram, m);
-            let values: Vec<f64> = e.values.iter().rev().map(|v| v.max(0.0)).collect();
-            let vectors = (0..max_rank.min(m)).map(|k| e.vector(m - 1 - k)).collect();
-            (values, vectors)
-        };
+        let (values, vectors) = top_directions(&outer_gram(&flat, m, d), m, max_rank);
         let centred: Vec<&[f64]> = flat.chunks_exact(d.max(1)).collect();
         let mut basis: Vec<Vec<f64>> = Vec::new();
         for v in vectors {
@@ -295,6 +276,20 @@ fn principal(
     let mut basis = basis;
     basis.truncate(useful.max(1));
     Ok((mean, basis, values))
+}
+
+/// The eigenvalues (descending: all of them for n ≤ [`FULL_EIGEN_MAX`], else the top `r`) and
+/// the top `r` unit eigenvectors of the symmetric n × n matrix `s`: a full decomposition for
+/// small matrices; orthogonal iteration for large ones, where a full one would cost O(n³) and
+/// only the top directions are needed.
+fn top_directions(s: &[f64], n: usize, r: usize) -> (Vec<f64>, Vec<Vec<f64>>) {
+    if n > FULL_EIGEN_MAX {
+        return top_eigen(s, n, r.min(n));
+    }
+    let e = sym_eigen(s, n);
+    let values = e.values.iter().rev().map(|v| v.max(0.0)).collect();
+    let vectors = (0..r.min(n)).map(|k| e.vector(n - 1 - k)).collect();
+    (values, vectors)
 }
 
 /// Squared distances of the tracks to (mean, basis[..r]) for every r in 0..=basis.len():

@@ -45,7 +45,9 @@ pub enum CardError {
     WeightsFile(String),
     #[error("weights {0:?} (members, sparse) named twice")]
     WeightsTwice(String),
-    #[error("sparse: needs the card's training spacing")]
+    #[error(
+        "sparse: needs the card's training spacing (positive) and a network that reads neighbours"
+    )]
     SparseWithoutSpacing,
     #[error("sparse: above must be a finite ratio of at least 1, got {0}")]
     SparseAbove(f64),
@@ -303,7 +305,8 @@ impl ModelCard {
             }
         }
         if let Some(sparse) = &self.sparse {
-            if self.spacing.is_none() {
+            let spacing = self.spacing.unwrap_or(f64::NAN);
+            if !(spacing.is_finite() && spacing > 0.0 && self.architecture.neighbors > 0) {
                 return Err(CardError::SparseWithoutSpacing);
             }
             if !(sparse.above.is_finite() && sparse.above >= 1.0) {

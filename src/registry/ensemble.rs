@@ -32,17 +32,11 @@ pub fn write_ensemble(
         .map(|d| ModelCard::read(d))
         .collect::<Result<Vec<_>, _>>()?;
     let first = &cards[0];
-    let out_path = out.canonicalize().ok();
+    not_an_input(out, dirs)?;
     let mut seen = Vec::new();
     for (dir, card) in dirs.iter().zip(&cards) {
         single_like(card, dir, first, &dirs[0])?;
         let path = dir.canonicalize().ok();
-        if path.is_some() && path == out_path {
-            return Err(fail(format!(
-                "{} is both a member and the output",
-                dir.display()
-            )));
-        }
         if path.is_some() && seen.contains(&path) {
             return Err(fail(format!("{} is named twice", dir.display())));
         }
@@ -71,7 +65,9 @@ pub const SPARSE_WEIGHTS_FILE: &str = "weights-sparse.safetensors";
 /// network for sets whose spacing exceeds `above` × `base`'s training spacing
 /// ([`crate::registry::SparseNetwork`]; one it had is replaced). The two must share kind,
 /// input, normalisation, architecture and test symmetries, and `base` must record its training
-/// spacing. `base`'s name, metrics and defaults are kept. Written as [`write_ensemble`] writes.
+/// spacing. `base`'s name, defaults and metrics are kept (they measure its own network, which
+/// still reads every set within the threshold: re-record any measured on sets beyond it).
+/// Written as [`write_ensemble`] writes.
 pub fn write_sparse(
     base: &Path,
     sparse: &Path,
@@ -80,15 +76,7 @@ pub fn write_sparse(
 ) -> Result<ModelCard, RegistryError> {
     let (mut card, extra) = (ModelCard::read(base)?, ModelCard::read(sparse)?);
     single_like(&extra, sparse, &card, base)?;
-    let out_path = out.canonicalize().ok();
-    for dir in [base, sparse] {
-        if out_path.is_some() && dir.canonicalize().ok() == out_path {
-            return Err(RegistryError::Ensemble(format!(
-                "{} is both an input and the output",
-                dir.display()
-            )));
-        }
-    }
+    not_an_input(out, &[base, sparse])?;
     card.sparse = Some(SparseNetwork {
         weights: SPARSE_WEIGHTS_FILE.into(),
         above,
@@ -98,6 +86,23 @@ pub fn write_sparse(
     let mut sources: Vec<PathBuf> = card.weight_files().map(|file| base.join(file)).collect();
     *sources.last_mut().expect("the sparse network's file") = sparse.join(WEIGHTS_FILE);
     install(card, &sources, out)
+}
+
+/// Refuses an output directory that is one of the `inputs` (by any path).
+fn not_an_input(out: &Path, inputs: &[impl AsRef<Path>]) -> Result<(), RegistryError> {
+    let Some(out_path) = out.canonicalize().ok() else {
+        return Ok(());
+    };
+    match inputs
+        .iter()
+        .find(|dir| dir.as_ref().canonicalize().ok().as_ref() == Some(&out_path))
+    {
+        Some(dir) => Err(RegistryError::Ensemble(format!(
+            "{} is both an input and the output",
+            dir.as_ref().display()
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// Checks that the model in `dir` (`card`) is a single network that `first` (in `first_dir`)
@@ -140,6 +145,11 @@ fn single_like(
 /// directory).
 fn install(card: ModelCard, sources: &[PathBuf], out: &Path) -> Result<ModelCard, RegistryError> {
     let fail = |reason: String| RegistryError::Ensemble(reason);
+    assert_eq!(
+        sources.len(),
+        card.weight_files().count(),
+        "install: one source per weight file"
+    );
     card.validate().map_err(|e| RegistryError::Card {
         path: out.join(CARD_FILE),
         reason: e.to_string(),
@@ -263,7 +273,7 @@ mod tests {
         assert!(err.to_string().contains("architecture"), "{err}");
         let err = write_ensemble(&[dirs[0].clone(), dirs[0].clone()], &dirs[0], "e").unwrap_err();
         assert!(
-            err.to_string().contains("both a member and the output"),
+            err.to_string().contains("both an input and the output"),
             "{err}"
         );
         assert!(!out.exists());
@@ -382,7 +392,7 @@ mod tests {
         }
     }
 
-    /// `dirs[0]`'s card with `spacing` as its training spacing, written back.
+    /// The card in `dir` with `spacing` as its training spacing, written back.
     fn record_spacing(dir: &Path, spacing: Option<f64>) {
         let mut card = ModelCard::read(dir).unwrap();
         card.spacing = spacing;
@@ -437,7 +447,10 @@ mod tests {
     #[test]
     fn a_sparse_network_needs_a_spacing_a_single_like_network_and_another_output() {
         let tmp = scratch("sparse-refusals");
-        let (_, _, dirs) = two_saved_models(&tmp);
+        let dirs = [tmp.path().join("a"), tmp.path().join("b")];
+        for (dir, seed) in dirs.iter().zip([7, 8]) {
+            save(&tiny_reading("n", Kind::Trajectories, 4, seed, 2), dir);
+        }
         let out = tmp.path().join("s");
         let refuse = |base: &Path, net: &Path, above: f64, out: &Path| {
             write_sparse(base, net, above, out).unwrap_err().to_string()
@@ -457,10 +470,16 @@ mod tests {
         save(&wider, &w);
         let err = refuse(&dirs[0], &w, 1.5, &out);
         assert!(err.contains("architecture"), "{err}");
-        // A model that already has a sparse network is not one.
+        // A model that already has a sparse network is not one; nothing is written.
         write_sparse(&dirs[0], &dirs[1], 1.5, &out).unwrap();
         let err = refuse(&dirs[0], &out, 1.5, &tmp.path().join("t"));
         assert!(err.contains("itself several networks"), "{err}");
-        assert!(!out.join("weights-1.safetensors").exists());
+        assert!(!tmp.path().join("t").exists() && !tmp.path().join("t.partial").exists());
+        // A card that reads no neighbours has no spacing to route by.
+        let mut card = ModelCard::read(&dirs[0]).unwrap();
+        card.architecture.neighbors = 0;
+        card.sparse = ModelCard::read(&out).unwrap().sparse;
+        let err = card.validate().unwrap_err().to_string();
+        assert!(err.contains("reads neighbours"), "{err}");
     }
 }

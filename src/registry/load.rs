@@ -132,7 +132,6 @@ impl LoadedModel {
             .embed(features, self.card.architecture.feature_dim(), &self.device)
     }
 
-    /// Network input for `points` (normalised, neighbour offsets appended), checking kind and
     /// Embeddings of network input by the fused forward of every network that reads it: the
     /// card's own first, then its members'; for a `sparse` set the card's sparse network
     /// alone, where it has one: features `[n, feature_dim]` -> one `[n, e]` each.
