@@ -10,9 +10,8 @@
 //!    builds its input with the same function, so training and serving cannot drift apart.
 //! 3. **embed** ([`embed`]): every network of the model that reads the set (the card's and its
 //!    members', or for a much sparser set its network for sparse sets) on the input and on its
-//!    images under the
-//!    card's test-time symmetries; each point's unit embeddings side by side, scaled to unit
-//!    length.
+//!    images under the card's test-time symmetries; each point's unit embeddings side by side,
+//!    scaled to unit length.
 //! 4. **cluster** ([`cluster`]): k-means on the embeddings, K given or chosen from the residual
 //!    curve (SOD or silhouette).
 //! 5. **refine** ([`crate::refine`]): an explicit model per group (line, circle, ellipse,
@@ -238,10 +237,10 @@ impl Embedding {
 /// Stage 3: the embeddings a fit clusters: `points` `[n, d]` -> `[m, e * c]` over the m rows
 /// read (a set denser than the model's training sets is thinned, with `seed`), where c counts
 /// the frame windows read ([`frames_read`]) times the networks (the card's and its members, or
-/// for a set sparser than training its network for sparse sets alone) times the images (the input and its images under every combination of `symmetries`). Row i
-/// holds the embeddings of point i by each network of each image of each window (networks vary
-/// fastest, windows slowest), side by side, divided by the square root of c so that it keeps
-/// unit length. An image that does not exist (a symmetry that does not apply to the kind, or
+/// for a set sparser than training its network for sparse sets alone) times the images (the
+/// input and its images under every combination of `symmetries`). Row i holds the embeddings
+/// of point i by each network of each image of each window (networks vary fastest, windows
+/// slowest), side by side, divided by the square root of c so that it keeps unit length. An image that does not exist (a symmetry that does not apply to the kind, or
 /// coordinates pushed past the accepted range) is left out.
 pub fn embed(
     model: &LoadedModel,

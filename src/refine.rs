@@ -14,9 +14,9 @@
 //!    with, or fewer than its model needs, is dropped and its points go to the others in the
 //!    next round. A round that moves no point ends the rounds. With a K the caller gave,
 //!    correspondences and curves keep a structure that shrank (only one left too few points
-//!    for its model is dropped), as the caller counted it: on the AdelaideRMF homography folds that
-//!    lowered the error in every cell of the grid (as-is 5.13 -> 4.65 %), and it leaves the LCE
-//!    grid level (21.85 -> 21.88 % over the cells with at most 20 % outliers). Motion subspaces
+//!    for its model is dropped), as the caller counted it: on the AdelaideRMF homography folds
+//!    that lowered the error in every cell of the grid (as-is 5.13 -> 4.65 %), and it leaves the
+//!    LCE grid level (21.85 -> 21.88 % over the cells with at most 20 % outliers). Motion subspaces
 //!    still drop it, and may answer fewer than K structures: keeping it raised the error on
 //!    KT3DMoSeg (3.90 -> 4.17 %) and on long generated clips (4.46 -> 4.70 %), and so did
 //!    re-seeding it from the tracks the others explain worst (4.59 and 4.25 %).

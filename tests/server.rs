@@ -118,6 +118,16 @@ fn tracks_of_every_length_are_fitted_with_structures_on_every_frame() {
     }
 }
 
+/// For each track of a `visible` mask, the frames it was seen in.
+fn frames_seen(visible: &Value) -> Vec<usize> {
+    visible
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_array().unwrap().iter().filter(|x| *x == 1).count())
+        .collect()
+}
+
 /// A whole KT3DMoSeg sequence, every track sent with the frames it was seen in: the tracks
 /// seen throughout are fitted as if sent alone, the others are placed on their motions, and a
 /// track seen in fewer than 3 frames is -1.
@@ -126,12 +136,7 @@ fn tracks_seen_in_some_frames_are_placed_on_the_motions() {
     let server = Server::start(&[]);
     let file = dataset("kt3dmoseg/Seq013_Clip02.json");
     let visible = file["visible"].clone();
-    let seen: Vec<usize> = visible
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_array().unwrap().iter().filter(|x| *x == 1).count())
-        .collect();
+    let seen = frames_seen(&visible);
     let frames = file["num_frames"].as_u64().unwrap() as usize;
     let complete: Vec<usize> = (0..seen.len()).filter(|&i| seen[i] == frames).collect();
     assert!(complete.len() > 100 && complete.len() < seen.len() / 2);
@@ -172,14 +177,8 @@ fn tracks_seen_in_some_frames_are_placed_on_the_motions() {
     // A sequence with a track seen in no frame: that track is -1, and the warning counts it.
     let file = dataset("kt3dmoseg/Seq059_Clip01.json");
     let visible = file["visible"].clone();
-    let few: Vec<usize> = visible
-        .as_array()
-        .unwrap()
-        .iter()
-        .enumerate()
-        .filter(|(_, v)| v.as_array().unwrap().iter().filter(|x| *x == 1).count() < 3)
-        .map(|(i, _)| i)
-        .collect();
+    let seen = frames_seen(&visible);
+    let few: Vec<usize> = (0..seen.len()).filter(|&i| seen[i] < 3).collect();
     assert!(!few.is_empty());
     let r = server.post_json("/v1/fit", &fit_body(&file, json!({"visible": visible})));
     assert_eq!(r.status, 200, "{}", r.text());

@@ -86,8 +86,8 @@
 //!
 //! **Spec.** `--data motion:[count=N][,seed=S][,frames=A-B][,motions=A-B][,points=A-B]
 //! [,noise=A-B][,outliers=A-B][,motion-scale=A-B][,focal=A-B][,width=A-B][,height=A-B]
-//! [,dropout=A-B]` generates in memory ([`MotionSpec`]; defaults: 200 samples, seed 0, [`MotionParams::default`]);
-//! one value `A` is the range `A-A`.
+//! [,dropout=A-B]` generates in memory ([`MotionSpec`]; defaults: 200 samples, seed 0,
+//! [`MotionParams::default`]); one value `A` is the range `A-A`.
 
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
