@@ -234,149 +234,75 @@ fn refine_from(
     k_chosen: Option<usize>,
     threads: &Threads,
 ) -> Refined {
-    {
-        let n = points.len();
-        let keep_shrunk = k_chosen.is_none() && keeps_shrunk_structures(family);
-        let members = |labels: &[i64], j: usize| -> Vec<usize> {
-            (0..n).filter(|&i| labels[i] == j as i64).collect()
-        };
-        let fit_on = |idx: &[usize]| {
-            let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
-            geometry::fit(family, &rows)
-        };
-        let mut current: Vec<i64> = labels.iter().map(|&l| l as i64).collect();
-        let mut groups: Vec<Option<Group>> = threads.map_n(k, |j| {
-            let idx = members(&current, j);
-            let fit = fit_on(&idx);
-            let frozen = matches!(fit.model, Model::Degenerate { .. });
-            Some(Group {
-                fit,
-                start: idx.len(),
-                fitted_on: idx,
-                type_chosen: true,
-                frozen,
-            })
-        });
-        let sigma = noise_level(&groups);
-        // Outlier groups are dissolved, when outliers may be answered.
-        if params.outliers {
-            for g in groups.iter_mut() {
-                let explained = |g: &Group| {
-                    let inliers = g.fit.inliers.iter().filter(|&&v| v).count();
-                    inliers as f64 >= OUTLIER_GROUP_INLIERS * g.start as f64
-                        && g.fit.sigma <= OUTLIER_GROUP_SIGMAS * sigma
-                };
-                if g.as_ref().is_some_and(|g| !g.frozen && !explained(g)) {
-                    *g = None;
-                }
-            }
-        }
-        let threshold = params
-            .threshold
-            .unwrap_or(OUTLIER_SIGMAS * sigma)
-            .max(f64::MIN_POSITIVE);
-        if params.hypotheses && family != Family::Subspace {
-            let live: Vec<Option<&Model>> = groups
-                .iter()
-                .map(|g| g.as_ref().filter(|g| !g.frozen).map(|g| &g.fit.model))
-                .collect();
-            let room = k_chosen.map_or(0, |k_max| {
-                k_max.saturating_sub(live.iter().flatten().count())
-            });
-            for swap in hypotheses::swaps(points, &live, family, threshold, room) {
-                let group = Some(Group {
-                    fit: swap.fit,
-                    fitted_on: Vec::new(),
-                    type_chosen: false,
-                    start: (swap.share * n as f64).round() as usize,
-                    frozen: false,
-                });
-                match swap.slot {
-                    Some(j) => groups[j] = group,
-                    None => groups.push(group),
-                }
-            }
-        }
-        let refit_same_type = |idx: &[usize], type_name: &str| {
-            let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
-            geometry::fit_type(type_name, &rows).unwrap_or_else(|| fit_on(idx))
-        };
-        let mut moved = false;
-        for _ in 0..MAX_ITERATIONS {
-            let next = assign(
-                points,
-                &current,
-                &groups,
-                params.outliers,
-                threshold,
-                threads,
-            );
-            if next == current {
-                break;
-            }
-            (current, moved) = (next, true);
-            // The groups whose points changed, refitted side by side with their model's type.
-            let mut changed: Vec<(usize, Vec<usize>, &str)> = groups
-                .iter()
-                .enumerate()
-                .filter_map(|(j, slot)| {
-                    let g = slot.as_ref().filter(|g| !g.frozen)?;
-                    let idx = members(&current, j);
-                    (idx != g.fitted_on).then_some((j, idx, g.fit.model.type_name()))
-                })
-                .collect();
-            let fits = threads.map(&mut changed, |(_, idx, type_name)| {
-                refit_same_type(idx, type_name)
-            });
-            for ((j, idx, _), fit) in changed.into_iter().zip(fits) {
-                let slot = &mut groups[j];
-                let Some(g) = slot else { continue };
-                let shrunk = 2 * idx.len() < g.start && !keep_shrunk;
-                if shrunk || matches!(fit.model, Model::Degenerate { .. }) {
-                    *slot = None;
-                } else {
-                    g.fit = fit;
-                    g.fitted_on = idx;
-                    // One candidate type: keeping it is choosing it.
-                    g.type_chosen = family.candidates().len() == 1;
-                }
-            }
-        }
-        // The type of each structure, chosen again on its settled points (unmoved groups keep
-        // their first fit, which was chosen on the same points).
-        let mut settled: Vec<(usize, Vec<usize>)> = groups
-            .iter()
-            .enumerate()
-            .filter_map(|(j, slot)| {
-                let g = slot.as_ref().filter(|g| moved && !g.frozen)?;
-                let idx = members(&current, j);
-                (!g.type_chosen || idx != g.fitted_on).then_some((j, idx))
-            })
-            .collect();
-        let fits = threads.map(&mut settled, |(_, idx)| fit_on(idx));
-        for ((j, idx), fit) in settled.into_iter().zip(fits) {
-            let Some(g) = groups[j].as_mut() else {
-                continue;
+    let n = points.len();
+    let keep_shrunk = k_chosen.is_none() && keeps_shrunk_structures(family);
+    let members = |labels: &[i64], j: usize| -> Vec<usize> {
+        (0..n).filter(|&i| labels[i] == j as i64).collect()
+    };
+    let fit_on = |idx: &[usize]| {
+        let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
+        geometry::fit(family, &rows)
+    };
+    let mut current: Vec<i64> = labels.iter().map(|&l| l as i64).collect();
+    let mut groups: Vec<Option<Group>> = threads.map_n(k, |j| {
+        let idx = members(&current, j);
+        let fit = fit_on(&idx);
+        let frozen = matches!(fit.model, Model::Degenerate { .. });
+        Some(Group {
+            fit,
+            start: idx.len(),
+            fitted_on: idx,
+            type_chosen: true,
+            frozen,
+        })
+    });
+    let sigma = noise_level(&groups);
+    // Outlier groups are dissolved, when outliers may be answered.
+    if params.outliers {
+        for g in groups.iter_mut() {
+            let explained = |g: &Group| {
+                let inliers = g.fit.inliers.iter().filter(|&&v| v).count();
+                inliers as f64 >= OUTLIER_GROUP_INLIERS * g.start as f64
+                    && g.fit.sigma <= OUTLIER_GROUP_SIGMAS * sigma
             };
-            if !matches!(fit.model, Model::Degenerate { .. }) {
-                g.fit = fit;
-                g.fitted_on = idx;
-                g.type_chosen = true;
+            if g.as_ref().is_some_and(|g| !g.frozen && !explained(g)) {
+                *g = None;
             }
         }
-        if k_chosen.is_some() && family != Family::Subspace {
-            merge(
-                points,
-                &mut current,
-                &mut groups,
-                family,
-                sigma,
-                threshold,
-                threads,
-            );
+    }
+    let threshold = params
+        .threshold
+        .unwrap_or(OUTLIER_SIGMAS * sigma)
+        .max(f64::MIN_POSITIVE);
+    if params.hypotheses && family != Family::Subspace {
+        let live: Vec<Option<&Model>> = groups
+            .iter()
+            .map(|g| g.as_ref().filter(|g| !g.frozen).map(|g| &g.fit.model))
+            .collect();
+        let room = k_chosen.map_or(0, |k_max| {
+            k_max.saturating_sub(live.iter().flatten().count())
+        });
+        for swap in hypotheses::swaps(points, &live, family, threshold, room) {
+            let group = Some(Group {
+                fit: swap.fit,
+                fitted_on: Vec::new(),
+                type_chosen: false,
+                start: (swap.share * n as f64).round() as usize,
+                frozen: false,
+            });
+            match swap.slot {
+                Some(j) => groups[j] = group,
+                None => groups.push(group),
+            }
         }
-        // Points of dropped groups that the last round did not move.
-        let current = assign(
+    }
+    let refit_same_type = |idx: &[usize], type_name: &str| {
+        let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
+        geometry::fit_type(type_name, &rows).unwrap_or_else(|| fit_on(idx))
+    };
+    let mut moved = false;
+    for _ in 0..MAX_ITERATIONS {
+        let next = assign(
             points,
             &current,
             &groups,
@@ -384,8 +310,80 @@ fn refine_from(
             threshold,
             threads,
         );
-        answer(points, current, groups, sigma)
+        if next == current {
+            break;
+        }
+        (current, moved) = (next, true);
+        // The groups whose points changed, refitted side by side with their model's type.
+        let mut changed: Vec<(usize, Vec<usize>, &str)> = groups
+            .iter()
+            .enumerate()
+            .filter_map(|(j, slot)| {
+                let g = slot.as_ref().filter(|g| !g.frozen)?;
+                let idx = members(&current, j);
+                (idx != g.fitted_on).then_some((j, idx, g.fit.model.type_name()))
+            })
+            .collect();
+        let fits = threads.map(&mut changed, |(_, idx, type_name)| {
+            refit_same_type(idx, type_name)
+        });
+        for ((j, idx, _), fit) in changed.into_iter().zip(fits) {
+            let slot = &mut groups[j];
+            let Some(g) = slot else { continue };
+            let shrunk = 2 * idx.len() < g.start && !keep_shrunk;
+            if shrunk || matches!(fit.model, Model::Degenerate { .. }) {
+                *slot = None;
+            } else {
+                g.fit = fit;
+                g.fitted_on = idx;
+                // One candidate type: keeping it is choosing it.
+                g.type_chosen = family.candidates().len() == 1;
+            }
+        }
     }
+    // The type of each structure, chosen again on its settled points (unmoved groups keep
+    // their first fit, which was chosen on the same points).
+    let mut settled: Vec<(usize, Vec<usize>)> = groups
+        .iter()
+        .enumerate()
+        .filter_map(|(j, slot)| {
+            let g = slot.as_ref().filter(|g| moved && !g.frozen)?;
+            let idx = members(&current, j);
+            (!g.type_chosen || idx != g.fitted_on).then_some((j, idx))
+        })
+        .collect();
+    let fits = threads.map(&mut settled, |(_, idx)| fit_on(idx));
+    for ((j, idx), fit) in settled.into_iter().zip(fits) {
+        let Some(g) = groups[j].as_mut() else {
+            continue;
+        };
+        if !matches!(fit.model, Model::Degenerate { .. }) {
+            g.fit = fit;
+            g.fitted_on = idx;
+            g.type_chosen = true;
+        }
+    }
+    if k_chosen.is_some() && family != Family::Subspace {
+        merge(
+            points,
+            &mut current,
+            &mut groups,
+            family,
+            sigma,
+            threshold,
+            threads,
+        );
+    }
+    // Points of dropped groups that the last round did not move.
+    let current = assign(
+        points,
+        &current,
+        &groups,
+        params.outliers,
+        threshold,
+        threads,
+    );
+    answer(points, current, groups, sigma)
 }
 
 /// Whether a structure that shrinks below half its start is kept when the caller gave K: for
