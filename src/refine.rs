@@ -195,9 +195,11 @@ pub fn refine_on(
 }
 
 /// Motion subspaces that lost a structure under the caller's K: the refinement from the best
-/// of [`STARTS`] seeded starts ([`starts`]), where each of its structures holds at least
-/// [`hypotheses::label_cost`] tracks and it explains the tracks at a lower truncated cost
-/// Σᵢ min(r(xᵢ)², τ²) than `first`; else `None`.
+/// of [`STARTS`] seeded starts ([`starts`]), where it keeps all `k` structures, each holds at
+/// least [`hypotheses::label_cost`] tracks, and it explains the tracks at a lower truncated cost
+/// Σᵢ min(r(xᵢ)², τ²) than `first`; else `None`. The cost charges nothing per structure (k
+/// subspaces nearly always cost less than k − 1): the size floor is what refuses a start that
+/// splits one motion. `points` `[n, 2F]` -> labels `[n]` and k structures.
 fn restarted(
     points: &PointSet,
     k: usize,
@@ -213,18 +215,19 @@ fn restarted(
     let start = starts::best_start(points, k, STARTS, threshold)?;
     let other = refine_from(points, &start, k, family, params, None, threads);
     let least = hypotheses::label_cost(family, points.len());
-    if other.structures.iter().any(|s| (s.inliers as f64) < least) {
+    if other.structures.len() < k || other.structures.iter().any(|s| (s.inliers as f64) < least) {
         return None;
     }
     let rows: Vec<&[f64]> = (0..points.len()).map(|i| points.row(i)).collect();
     let cost = |r: &Refined| {
         let models: Vec<&Model> = r.structures.iter().map(|s| &s.model).collect();
-        starts::cost(&rows, &models, threshold * threshold)
+        starts::cost(&rows, &models, threshold)
     };
     (cost(&other) < cost(first)).then_some(other)
 }
 
-/// [`refine_on`] from one start, on the calling thread pool.
+/// [`refine_on`] from one start (`labels` `[n]` in 0..k), on the calling thread pool.
+/// `points` `[n, d]` -> labels `[n]` (−1 for outliers) and one model per remaining label.
 fn refine_from(
     points: &PointSet,
     labels: &[usize],
@@ -917,6 +920,12 @@ mod tests {
         let labels: Vec<usize> = r.labels.iter().map(|&l| l as usize).collect();
         let error = crate::metrics::error_rate(truth, &labels);
         assert!(error < 0.02, "error {error}");
+        // The same answer on any number of threads.
+        for count in [2, 3] {
+            let spread = Threads::new(count).unwrap();
+            let again = refine_on(points, &start, 3, family, &refine_params, None, &spread);
+            assert_eq!(again, r, "{count} threads");
+        }
         // Under a K chosen automatically the lost structure stays lost.
         let chosen = refine(points, &start, 3, family, &refine_params, Some(8));
         assert_eq!(chosen, first);

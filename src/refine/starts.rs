@@ -35,19 +35,19 @@ pub const MAX_ROWS: usize = 400;
 
 /// The least-cost labelling of `points` (tracks, `[n, 2F]`) into `k` subspaces among `count`
 /// seeded starts, each descended by plain k-subspaces; `threshold` τ truncates the cost.
+/// `None` also when fewer than k × [`NEIGHBOURHOOD`] tracks are seen, or τ is not positive.
 /// `points` `[n, 2F]` -> labels `[n]` in 0..k, or `None` when no start gives k subspaces.
 pub fn best_start(points: &PointSet, k: usize, count: usize, threshold: f64) -> Option<Vec<usize>> {
     let n = points.len();
-    if k < 2 || n < k * NEIGHBOURHOOD || !(threshold.is_finite() && threshold > 0.0) {
-        return None;
-    }
     let seen: Vec<usize> = if n <= MAX_ROWS {
         (0..n).collect()
     } else {
         (0..MAX_ROWS).map(|i| i * n / MAX_ROWS).collect()
     };
+    if k < 2 || seen.len() < k * NEIGHBOURHOOD || !(threshold.is_finite() && threshold > 0.0) {
+        return None;
+    }
     let rows: Vec<&[f64]> = seen.iter().map(|&i| points.row(i)).collect();
-    let tau2 = threshold * threshold;
     let mut best: Option<(f64, Vec<Model>)> = None;
     for s in 0..count {
         let mut rng = ChaCha8Rng::seed_from_u64(0x5eed_0000 + s as u64);
@@ -57,7 +57,7 @@ pub fn best_start(points: &PointSet, k: usize, count: usize, threshold: f64) -> 
         if models.len() < k {
             continue;
         }
-        let c = cost(&rows, &models, tau2);
+        let c = cost(&rows, &models, threshold);
         if best.as_ref().is_none_or(|b| c < b.0) {
             best = Some((c, models));
         }
@@ -67,6 +67,7 @@ pub fn best_start(points: &PointSet, k: usize, count: usize, threshold: f64) -> 
 }
 
 /// k seed subspaces, drawn k-means++-style; `None` when a neighbourhood gives no subspace.
+/// rows `[n, 2F]` -> k models.
 fn seeded(rows: &[&[f64]], k: usize, rng: &mut ChaCha8Rng) -> Option<Vec<Model>> {
     let n = rows.len();
     let mut models: Vec<Model> = Vec::with_capacity(k);
@@ -99,7 +100,8 @@ fn seeded(rows: &[&[f64]], k: usize, rng: &mut ChaCha8Rng) -> Option<Vec<Model>>
     Some(models)
 }
 
-/// The [`NEIGHBOURHOOD`] rows nearest `rows[seed]` (itself first).
+/// The [`NEIGHBOURHOOD`] rows nearest `rows[seed]`, nearest first (ties by index).
+/// rows `[n, 2F]` (n ≥ [`NEIGHBOURHOOD`]) -> `[NEIGHBOURHOOD, 2F]`.
 fn neighbourhood<'a>(rows: &[&'a [f64]], seed: usize) -> Vec<&'a [f64]> {
     let centre = rows[seed];
     let mut by_distance: Vec<(f64, usize)> = rows
@@ -110,8 +112,9 @@ fn neighbourhood<'a>(rows: &[&'a [f64]], seed: usize) -> Vec<&'a [f64]> {
             (d, i)
         })
         .collect();
-    by_distance.select_nth_unstable_by(NEIGHBOURHOOD - 1, |a, b| a.0.total_cmp(&b.0));
-    by_distance[..NEIGHBOURHOOD].sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let order = |a: &(f64, usize), b: &(f64, usize)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
+    by_distance.select_nth_unstable_by(NEIGHBOURHOOD - 1, order);
+    by_distance[..NEIGHBOURHOOD].sort_by(order);
     by_distance[..NEIGHBOURHOOD]
         .iter()
         .map(|&(_, i)| rows[i])
@@ -119,7 +122,8 @@ fn neighbourhood<'a>(rows: &[&'a [f64]], seed: usize) -> Vec<&'a [f64]> {
 }
 
 /// Plain k-subspaces from `models`: assign, refit, until no row moves or [`ROUNDS`] rounds.
-/// A subspace left with too few rows for a plain fit is dropped.
+/// A subspace left with fewer than [`NEIGHBOURHOOD`] rows is dropped. rows `[n, 2F]` -> at most
+/// `models.len()` models.
 fn descend(rows: &[&[f64]], mut models: Vec<Model>) -> Vec<Model> {
     let mut labels: Vec<usize> = Vec::new();
     for _ in 0..ROUNDS {
@@ -158,16 +162,14 @@ fn nearest<M: Borrow<Model>>(models: &[M], row: &[f64]) -> (usize, f64) {
         .unwrap_or((0, f64::INFINITY))
 }
 
-/// Σ over `rows` of min(r², τ²), r the residual to the nearest of `models`.
-pub fn cost<M: Borrow<Model>>(rows: &[&[f64]], models: &[M], tau2: f64) -> f64 {
+/// Σ over `rows` of min(r², τ²) / τ², r the residual to the nearest of `models` and τ =
+/// `threshold` (in units of τ², so that no τ overflows it). rows `[n, 2F]` -> a number in
+/// [0, n].
+pub fn cost<M: Borrow<Model>>(rows: &[&[f64]], models: &[M], threshold: f64) -> f64 {
     rows.iter()
         .map(|r| {
-            let e = nearest(models, r).1;
-            if e.is_finite() {
-                (e * e).min(tau2)
-            } else {
-                tau2
-            }
+            let e = nearest(models, r).1 / threshold;
+            if e.is_finite() { (e * e).min(1.0) } else { 1.0 }
         })
         .sum()
 }
@@ -193,6 +195,37 @@ mod tests {
         assert!(error < 0.05, "error {error}");
         // The same starts give the same answer.
         assert_eq!(best_start(&sample.points, 3, 8, 5.0), Some(labels));
+    }
+
+    #[test]
+    fn starts_see_at_most_max_rows_and_need_a_neighbourhood_per_subspace() {
+        let params = MotionParams {
+            frames: [8, 8],
+            motions: [2, 2],
+            points: [300, 300],
+            noise: [0.3, 0.3],
+            ..MotionParams::default()
+        };
+        let sample = MotionGenerator::new(6, params).unwrap().sample("s").sample;
+        let n = sample.points.len();
+        assert!(n > MAX_ROWS);
+        // Every track is labelled, from subspaces found on the rows seen.
+        let labels = best_start(&sample.points, 2, 4, 5.0).unwrap();
+        assert_eq!(labels.len(), n);
+        assert!(labels.iter().all(|&l| l < 2));
+        // More subspaces than the rows seen can seed: no start, at once.
+        assert_eq!(
+            best_start(&sample.points, MAX_ROWS / NEIGHBOURHOOD + 1, 4, 5.0),
+            None
+        );
+        // Exactly one neighbourhood per subspace.
+        let rows = sample
+            .points
+            .select(&(0..2 * NEIGHBOURHOOD).collect::<Vec<_>>())
+            .unwrap();
+        if let Some(labels) = best_start(&rows, 2, 4, 5.0) {
+            assert!(labels.iter().all(|&l| l < 2));
+        }
     }
 
     #[test]
