@@ -21,6 +21,7 @@
 //!    timings.
 
 use std::collections::BTreeMap;
+use std::ops::RangeInclusive;
 use std::time::Instant;
 
 use crate::cluster::{self, ClusterError, ClusterParams, Clustering, Points, Selection};
@@ -622,10 +623,25 @@ fn nearest_centroid(sums: &BTreeMap<i64, (Vec<f64>, usize)>, v: &[f32]) -> Optio
         .map(|(l, _)| l)
 }
 
+/// The fewest points that stab every one of `ranges` (a point in each), ascending: the greedy
+/// by right end (each range not yet stabbed gives its right end), which is optimal.
+/// ranges `[m]` -> points `[p]`, p ≤ m.
+fn fewest_stabbing(mut ranges: Vec<RangeInclusive<usize>>) -> Vec<usize> {
+    ranges.sort_by_key(|r| (*r.end(), *r.start()));
+    let mut points: Vec<usize> = Vec::new();
+    for r in ranges {
+        if points.last().is_none_or(|p| p < r.start()) {
+            points.push(*r.end());
+        }
+    }
+    points
+}
+
 impl Window<'_> {
     /// Partly seen tracks with a run of at least the network's frame count of consecutive seen
-    /// frames: the window of that many frames centred in the run is embedded with every track
-    /// seen in all of it. Where the network's label centroids place the tracks seen throughout
+    /// frames: a window of that many frames inside the run is embedded with every track seen in
+    /// all of it. The windows are the fewest that give every such track one
+    /// ([`fewest_stabbing`]), and a track takes the one nearest the centre of its run. Where the network's label centroids place the tracks seen throughout
     /// better than the motion subspaces do over the window's frames (each half of them judged
     /// by both fitted on the other half), the window's partly seen tracks take the label of
     /// the nearest centroid.
@@ -641,7 +657,8 @@ impl Window<'_> {
         if width < 2 || width > frames {
             return Ok(());
         }
-        let mut windows: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+        // Each placeable track's valid window starts (inside its longest run).
+        let mut valid: Vec<(usize, RangeInclusive<usize>)> = Vec::new();
         for i in 0..points.len() {
             if visibility.throughout(i) || placed.labels[i] < 0 {
                 continue;
@@ -654,10 +671,16 @@ impl Window<'_> {
                 }
             }
             if best.1 >= width {
-                windows
-                    .entry(best.0 + (best.1 - width) / 2)
-                    .or_default()
-                    .push(i);
+                valid.push((i, best.0..=best.0 + best.1 - width));
+            }
+        }
+        let mut windows: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+        let starts = fewest_stabbing(valid.iter().map(|(_, r)| r.clone()).collect());
+        for (i, range) in valid {
+            let centre = (range.start() + range.end()) / 2;
+            let inside = starts.iter().copied().filter(|s| range.contains(s));
+            if let Some(start) = inside.min_by_key(|&s| (s.abs_diff(centre), s)) {
+                windows.entry(start).or_default().push(i);
             }
         }
         if windows.is_empty() {
@@ -864,6 +887,41 @@ impl LoadedModel {
 pub(crate) mod tests {
     use super::*;
     use crate::registry::tests::tiny;
+
+    #[test]
+    fn the_fewest_window_starts_give_every_track_one() {
+        // Brute force over every set of starts in 0..12 for random ranges: the greedy's count is
+        // the least that stabs them all, and it stabs them all.
+        let mut state = 7u64;
+        let mut next = |m: u64| {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            ((state >> 33) % m) as usize
+        };
+        for _ in 0..200 {
+            let ranges: Vec<RangeInclusive<usize>> = (0..1 + next(6))
+                .map(|_| {
+                    let a = next(10);
+                    a..=a + next(3)
+                })
+                .collect();
+            let points = fewest_stabbing(ranges.clone());
+            assert!(points.windows(2).all(|w| w[0] < w[1]), "{points:?}");
+            let stabs = |set: &[usize]| ranges.iter().all(|r| set.iter().any(|p| r.contains(p)));
+            assert!(stabs(&points), "{ranges:?} {points:?}");
+            let least = (0u32..1 << 12)
+                .filter(|mask| {
+                    let set: Vec<usize> = (0..12).filter(|b| mask >> b & 1 == 1).collect();
+                    stabs(&set)
+                })
+                .map(u32::count_ones)
+                .min()
+                .unwrap();
+            assert_eq!(points.len(), least as usize, "{ranges:?}");
+        }
+        assert!(fewest_stabbing(Vec::new()).is_empty());
+    }
 
     /// Ten 2-frame tracks with coordinates `(v * a) % m`, a 20 x 20 image and k-means with K = 2.
     pub(crate) fn ten_tracks(a: usize, m: usize) -> (PointSet, Option<ImageSize>, ClusterParams) {
