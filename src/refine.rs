@@ -17,17 +17,9 @@
 //!    for its model is dropped), as the caller counted it: on the AdelaideRMF homography folds
 //!    that lowered the error in every cell of the grid (as-is 5.13 -> 4.65 %), and it leaves the
 //!    LCE grid level (21.85 -> 21.88 % over the cells with at most 20 % outliers). Motion subspaces
-//!    still drop it: keeping it raised the error on KT3DMoSeg (3.90 -> 4.17 %) and on long
-//!    generated clips (4.46 -> 4.70 %), and so did re-seeding it from the tracks the others
-//!    explain worst (4.59 and 4.25 %).
-//!
-//! **Restarts.** Reassignment is a local search. Motion subspaces that lost a structure under a
-//! K the caller gave are refined once more from the best of [`STARTS`] seeded k-subspaces starts
-//! ([`starts`]), and that answer is taken where every one of its structures holds at least
-//! [`hypotheses::label_cost`] tracks and its truncated cost Σᵢ min(r(xᵢ)², τ²) is lower: a small
-//! object merged into another motion, which an affine subspace of rank 4 holds within the noise,
-//! is found again (long generated clips 4.46 -> 3.07 %; KT3DMoSeg unchanged). Under a K chosen
-//! automatically a lost structure stays lost: it is what brings a K chosen too high back down.
+//!    still drop it, and may answer fewer than K structures: keeping it raised the error on
+//!    KT3DMoSeg (3.90 -> 4.17 %) and on long generated clips (4.46 -> 4.70 %), and so did
+//!    re-seeding it from the tracks the others explain worst (4.59 and 4.25 %).
 //!
 //! Before the rounds, models proposed from small neighbourhoods of the input may replace learned
 //! structures where they explain the whole set better ([`hypotheses`]): a learned group that
@@ -63,7 +55,6 @@
 //! never take others'.
 
 mod hypotheses;
-mod starts;
 
 use crate::data::{Kind, PointSet};
 use crate::geometry::{self, Family, Model};
@@ -81,8 +72,6 @@ pub const OUTLIER_GROUP_INLIERS: f64 = 0.5;
 pub const OUTLIER_GROUP_SIGMAS: f64 = 3.0;
 /// Two structures whose joint fit is within this many σ merge.
 pub const MERGE_SIGMAS: f64 = 1.5;
-/// Seeded starts drawn when motion subspaces lost a structure under the caller's K.
-pub const STARTS: usize = 16;
 
 /// What refinement may do.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -184,128 +173,148 @@ pub fn refine_on(
     threads: &Threads,
 ) -> Refined {
     threads.install(|| {
-        let first = refine_from(points, labels, k, family, params, k_chosen, threads);
-        let lost = first.structures.len() < k;
-        if family == Family::Subspace && k_chosen.is_none() && lost {
-            restarted(points, k, params, &first, threads).unwrap_or(first)
-        } else {
-            first
-        }
-    })
-}
-
-/// Motion subspaces that lost a structure under the caller's K: the refinement from the best
-/// of [`STARTS`] seeded starts ([`starts`]), where it keeps all `k` structures, each holds at
-/// least [`hypotheses::label_cost`] tracks, and it explains the tracks at a lower truncated cost
-/// Σᵢ min(r(xᵢ)², τ²) than `first`; else `None`. The cost charges nothing per structure (k
-/// subspaces nearly always cost less than k − 1): the size floor is what refuses a start that
-/// splits one motion. `points` `[n, 2F]` -> labels `[n]` and k structures.
-fn restarted(
-    points: &PointSet,
-    k: usize,
-    params: &RefineParams,
-    first: &Refined,
-    threads: &Threads,
-) -> Option<Refined> {
-    let family = Family::Subspace;
-    let threshold = params
-        .threshold
-        .unwrap_or(OUTLIER_SIGMAS * first.sigma)
-        .max(f64::MIN_POSITIVE);
-    let start = starts::best_start(points, k, STARTS, threshold)?;
-    let other = refine_from(points, &start, k, family, params, None, threads);
-    let least = hypotheses::label_cost(family, points.len());
-    if other.structures.len() < k || other.structures.iter().any(|s| (s.inliers as f64) < least) {
-        return None;
-    }
-    let rows: Vec<&[f64]> = (0..points.len()).map(|i| points.row(i)).collect();
-    let cost = |r: &Refined| {
-        let models: Vec<&Model> = r.structures.iter().map(|s| &s.model).collect();
-        starts::cost(&rows, &models, threshold)
-    };
-    (cost(&other) < cost(first)).then_some(other)
-}
-
-/// [`refine_on`] from one start (`labels` `[n]` in 0..k), on the calling thread pool.
-/// `points` `[n, d]` -> labels `[n]` (−1 for outliers) and one model per remaining label.
-fn refine_from(
-    points: &PointSet,
-    labels: &[usize],
-    k: usize,
-    family: Family,
-    params: &RefineParams,
-    k_chosen: Option<usize>,
-    threads: &Threads,
-) -> Refined {
-    let n = points.len();
-    let keep_shrunk = k_chosen.is_none() && keeps_shrunk_structures(family);
-    let members = |labels: &[i64], j: usize| -> Vec<usize> {
-        (0..n).filter(|&i| labels[i] == j as i64).collect()
-    };
-    let fit_on = |idx: &[usize]| {
-        let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
-        geometry::fit(family, &rows)
-    };
-    let mut current: Vec<i64> = labels.iter().map(|&l| l as i64).collect();
-    let mut groups: Vec<Option<Group>> = threads.map_n(k, |j| {
-        let idx = members(&current, j);
-        let fit = fit_on(&idx);
-        let frozen = matches!(fit.model, Model::Degenerate { .. });
-        Some(Group {
-            fit,
-            start: idx.len(),
-            fitted_on: idx,
-            type_chosen: true,
-            frozen,
-        })
-    });
-    let sigma = noise_level(&groups);
-    // Outlier groups are dissolved, when outliers may be answered.
-    if params.outliers {
-        for g in groups.iter_mut() {
-            let explained = |g: &Group| {
-                let inliers = g.fit.inliers.iter().filter(|&&v| v).count();
-                inliers as f64 >= OUTLIER_GROUP_INLIERS * g.start as f64
-                    && g.fit.sigma <= OUTLIER_GROUP_SIGMAS * sigma
-            };
-            if g.as_ref().is_some_and(|g| !g.frozen && !explained(g)) {
-                *g = None;
-            }
-        }
-    }
-    let threshold = params
-        .threshold
-        .unwrap_or(OUTLIER_SIGMAS * sigma)
-        .max(f64::MIN_POSITIVE);
-    if params.hypotheses && family != Family::Subspace {
-        let live: Vec<Option<&Model>> = groups
-            .iter()
-            .map(|g| g.as_ref().filter(|g| !g.frozen).map(|g| &g.fit.model))
-            .collect();
-        let room = k_chosen.map_or(0, |k_max| {
-            k_max.saturating_sub(live.iter().flatten().count())
+        let n = points.len();
+        let keep_shrunk = k_chosen.is_none() && keeps_shrunk_structures(family);
+        let members = |labels: &[i64], j: usize| -> Vec<usize> {
+            (0..n).filter(|&i| labels[i] == j as i64).collect()
+        };
+        let fit_on = |idx: &[usize]| {
+            let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
+            geometry::fit(family, &rows)
+        };
+        let mut current: Vec<i64> = labels.iter().map(|&l| l as i64).collect();
+        let mut groups: Vec<Option<Group>> = threads.map_n(k, |j| {
+            let idx = members(&current, j);
+            let fit = fit_on(&idx);
+            let frozen = matches!(fit.model, Model::Degenerate { .. });
+            Some(Group {
+                fit,
+                start: idx.len(),
+                fitted_on: idx,
+                type_chosen: true,
+                frozen,
+            })
         });
-        for swap in hypotheses::swaps(points, &live, family, threshold, room) {
-            let group = Some(Group {
-                fit: swap.fit,
-                fitted_on: Vec::new(),
-                type_chosen: false,
-                start: (swap.share * n as f64).round() as usize,
-                frozen: false,
-            });
-            match swap.slot {
-                Some(j) => groups[j] = group,
-                None => groups.push(group),
+        let sigma = noise_level(&groups);
+        // Outlier groups are dissolved, when outliers may be answered.
+        if params.outliers {
+            for g in groups.iter_mut() {
+                let explained = |g: &Group| {
+                    let inliers = g.fit.inliers.iter().filter(|&&v| v).count();
+                    inliers as f64 >= OUTLIER_GROUP_INLIERS * g.start as f64
+                        && g.fit.sigma <= OUTLIER_GROUP_SIGMAS * sigma
+                };
+                if g.as_ref().is_some_and(|g| !g.frozen && !explained(g)) {
+                    *g = None;
+                }
             }
         }
-    }
-    let refit_same_type = |idx: &[usize], type_name: &str| {
-        let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
-        geometry::fit_type(type_name, &rows).unwrap_or_else(|| fit_on(idx))
-    };
-    let mut moved = false;
-    for _ in 0..MAX_ITERATIONS {
-        let next = assign(
+        let threshold = params
+            .threshold
+            .unwrap_or(OUTLIER_SIGMAS * sigma)
+            .max(f64::MIN_POSITIVE);
+        if params.hypotheses && family != Family::Subspace {
+            let live: Vec<Option<&Model>> = groups
+                .iter()
+                .map(|g| g.as_ref().filter(|g| !g.frozen).map(|g| &g.fit.model))
+                .collect();
+            let room = k_chosen.map_or(0, |k_max| {
+                k_max.saturating_sub(live.iter().flatten().count())
+            });
+            for swap in hypotheses::swaps(points, &live, family, threshold, room) {
+                let group = Some(Group {
+                    fit: swap.fit,
+                    fitted_on: Vec::new(),
+                    type_chosen: false,
+                    start: (swap.share * n as f64).round() as usize,
+                    frozen: false,
+                });
+                match swap.slot {
+                    Some(j) => groups[j] = group,
+                    None => groups.push(group),
+                }
+            }
+        }
+        let refit_same_type = |idx: &[usize], type_name: &str| {
+            let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
+            geometry::fit_type(type_name, &rows).unwrap_or_else(|| fit_on(idx))
+        };
+        let mut moved = false;
+        for _ in 0..MAX_ITERATIONS {
+            let next = assign(
+                points,
+                &current,
+                &groups,
+                params.outliers,
+                threshold,
+                threads,
+            );
+            if next == current {
+                break;
+            }
+            (current, moved) = (next, true);
+            // The groups whose points changed, refitted side by side with their model's type.
+            let mut changed: Vec<(usize, Vec<usize>, &str)> = groups
+                .iter()
+                .enumerate()
+                .filter_map(|(j, slot)| {
+                    let g = slot.as_ref().filter(|g| !g.frozen)?;
+                    let idx = members(&current, j);
+                    (idx != g.fitted_on).then_some((j, idx, g.fit.model.type_name()))
+                })
+                .collect();
+            let fits = threads.map(&mut changed, |(_, idx, type_name)| {
+                refit_same_type(idx, type_name)
+            });
+            for ((j, idx, _), fit) in changed.into_iter().zip(fits) {
+                let slot = &mut groups[j];
+                let Some(g) = slot else { continue };
+                let shrunk = 2 * idx.len() < g.start && !keep_shrunk;
+                if shrunk || matches!(fit.model, Model::Degenerate { .. }) {
+                    *slot = None;
+                } else {
+                    g.fit = fit;
+                    g.fitted_on = idx;
+                    // One candidate type: keeping it is choosing it.
+                    g.type_chosen = family.candidates().len() == 1;
+                }
+            }
+        }
+        // The type of each structure, chosen again on its settled points (unmoved groups keep
+        // their first fit, which was chosen on the same points).
+        let mut settled: Vec<(usize, Vec<usize>)> = groups
+            .iter()
+            .enumerate()
+            .filter_map(|(j, slot)| {
+                let g = slot.as_ref().filter(|g| moved && !g.frozen)?;
+                let idx = members(&current, j);
+                (!g.type_chosen || idx != g.fitted_on).then_some((j, idx))
+            })
+            .collect();
+        let fits = threads.map(&mut settled, |(_, idx)| fit_on(idx));
+        for ((j, idx), fit) in settled.into_iter().zip(fits) {
+            let Some(g) = groups[j].as_mut() else {
+                continue;
+            };
+            if !matches!(fit.model, Model::Degenerate { .. }) {
+                g.fit = fit;
+                g.fitted_on = idx;
+                g.type_chosen = true;
+            }
+        }
+        if k_chosen.is_some() && family != Family::Subspace {
+            merge(
+                points,
+                &mut current,
+                &mut groups,
+                family,
+                sigma,
+                threshold,
+                threads,
+            );
+        }
+        // Points of dropped groups that the last round did not move.
+        let current = assign(
             points,
             &current,
             &groups,
@@ -313,80 +322,8 @@ fn refine_from(
             threshold,
             threads,
         );
-        if next == current {
-            break;
-        }
-        (current, moved) = (next, true);
-        // The groups whose points changed, refitted side by side with their model's type.
-        let mut changed: Vec<(usize, Vec<usize>, &str)> = groups
-            .iter()
-            .enumerate()
-            .filter_map(|(j, slot)| {
-                let g = slot.as_ref().filter(|g| !g.frozen)?;
-                let idx = members(&current, j);
-                (idx != g.fitted_on).then_some((j, idx, g.fit.model.type_name()))
-            })
-            .collect();
-        let fits = threads.map(&mut changed, |(_, idx, type_name)| {
-            refit_same_type(idx, type_name)
-        });
-        for ((j, idx, _), fit) in changed.into_iter().zip(fits) {
-            let slot = &mut groups[j];
-            let Some(g) = slot else { continue };
-            let shrunk = 2 * idx.len() < g.start && !keep_shrunk;
-            if shrunk || matches!(fit.model, Model::Degenerate { .. }) {
-                *slot = None;
-            } else {
-                g.fit = fit;
-                g.fitted_on = idx;
-                // One candidate type: keeping it is choosing it.
-                g.type_chosen = family.candidates().len() == 1;
-            }
-        }
-    }
-    // The type of each structure, chosen again on its settled points (unmoved groups keep
-    // their first fit, which was chosen on the same points).
-    let mut settled: Vec<(usize, Vec<usize>)> = groups
-        .iter()
-        .enumerate()
-        .filter_map(|(j, slot)| {
-            let g = slot.as_ref().filter(|g| moved && !g.frozen)?;
-            let idx = members(&current, j);
-            (!g.type_chosen || idx != g.fitted_on).then_some((j, idx))
-        })
-        .collect();
-    let fits = threads.map(&mut settled, |(_, idx)| fit_on(idx));
-    for ((j, idx), fit) in settled.into_iter().zip(fits) {
-        let Some(g) = groups[j].as_mut() else {
-            continue;
-        };
-        if !matches!(fit.model, Model::Degenerate { .. }) {
-            g.fit = fit;
-            g.fitted_on = idx;
-            g.type_chosen = true;
-        }
-    }
-    if k_chosen.is_some() && family != Family::Subspace {
-        merge(
-            points,
-            &mut current,
-            &mut groups,
-            family,
-            sigma,
-            threshold,
-            threads,
-        );
-    }
-    // Points of dropped groups that the last round did not move.
-    let current = assign(
-        points,
-        &current,
-        &groups,
-        params.outliers,
-        threshold,
-        threads,
-    );
-    answer(points, current, groups, sigma)
+        answer(points, current, groups, sigma)
+    })
 }
 
 /// Whether a structure that shrinks below half its start is kept when the caller gave K: for
@@ -877,59 +814,6 @@ mod tests {
         assert_eq!(r.structures.len(), 2);
         let want: Vec<i64> = labels.iter().map(|&l| l as i64).collect();
         assert_eq!(r.labels, want);
-    }
-
-    #[test]
-    fn a_motion_lost_under_the_callers_k_is_found_again_from_seeded_starts() {
-        use crate::data::motion::{MotionGenerator, MotionParams};
-        let params = MotionParams {
-            frames: [20, 20],
-            motions: [3, 3],
-            points: [60, 60],
-            noise: [0.5, 0.5],
-            motion_scale: [0.2, 0.2],
-            ..MotionParams::default()
-        };
-        let sample = MotionGenerator::new(11, params).unwrap().sample("s").sample;
-        let truth = &sample.labels;
-        // The learned groups hold motion 2 inside motion 0, and a group of four tracks of
-        // motion 0 as the third: it loses them to the whole motion's subspace.
-        let mut seen_of_0 = 0;
-        let start: Vec<usize> = truth
-            .iter()
-            .map(|&l| match l {
-                0 if seen_of_0 < 4 => {
-                    seen_of_0 += 1;
-                    2
-                }
-                2 => 0,
-                l => l,
-            })
-            .collect();
-        let refine_params = RefineParams {
-            outliers: false,
-            ..RefineParams::default()
-        };
-        let threads = Threads::default();
-        let points = &sample.points;
-        let family = Family::Subspace;
-        let first = refine_from(points, &start, 3, family, &refine_params, None, &threads);
-        assert!(first.structures.len() < 3, "the case needs restarts");
-        let r = refine(points, &start, 3, family, &refine_params, None);
-        assert_eq!(r.structures.len(), 3);
-        let labels: Vec<usize> = r.labels.iter().map(|&l| l as usize).collect();
-        let error = crate::metrics::error_rate(truth, &labels);
-        assert!(error < 0.02, "error {error}");
-        // The same answer on any number of threads.
-        for count in [2, 3] {
-            let spread = Threads::new(count).unwrap();
-            let again = refine_on(points, &start, 3, family, &refine_params, None, &spread);
-            assert_eq!(again, r, "{count} threads");
-        }
-        // Under a K chosen automatically the lost structure stays lost.
-        let chosen = refine(points, &start, 3, family, &refine_params, Some(8));
-        assert_eq!(chosen, first);
-        assert!(finite(&r));
     }
 
     /// Kind, row width, values, labels, K, family.

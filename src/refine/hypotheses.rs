@@ -279,7 +279,7 @@ fn best_swap(pool: &[Vec<f64>], chosen: &[usize]) -> Option<(usize, usize, f64)>
 /// The price of one more structure, in outliers' worth (units of τ²): 3 × the family's largest
 /// minimal sample, or 2 % of the `rows` seen if more. A structure is added only where it
 /// explains that many points that no current structure does.
-pub(super) fn label_cost(family: Family, rows: usize) -> f64 {
+fn label_cost(family: Family, rows: usize) -> f64 {
     (3 * family.largest_sample()).max(rows / 50) as f64
 }
 
