@@ -637,14 +637,49 @@ fn fewest_stabbing(mut ranges: Vec<RangeInclusive<usize>>) -> Vec<usize> {
     points
 }
 
+/// The frame windows of `width` frames that place `tracks` (index, seen flags per frame): each
+/// track seen in a run of at least `width` consecutive frames gets a window inside its longest
+/// run (the first, among equally long runs). The starts are the fewest that give every such
+/// track one ([`fewest_stabbing`]), and a track takes the one nearest the centre of its run
+/// (the earlier of two as near). -> window start -> the tracks it places, ascending.
+fn window_starts<'a>(
+    tracks: impl Iterator<Item = (usize, &'a [bool])>,
+    width: usize,
+) -> BTreeMap<usize, Vec<usize>> {
+    // Each track's valid starts: a run [a, a + L) holds the windows starting at a..=a + L - width.
+    let mut valid: Vec<(usize, RangeInclusive<usize>)> = Vec::new();
+    for (i, seen) in tracks {
+        let (mut best, mut run) = ((0, 0), 0);
+        for (f, &s) in seen.iter().enumerate() {
+            run = if s { run + 1 } else { 0 };
+            if run > best.1 {
+                best = (f + 1 - run, run);
+            }
+        }
+        if best.1 >= width.max(1) {
+            valid.push((i, best.0..=best.0 + best.1 - width.max(1)));
+        }
+    }
+    let starts = fewest_stabbing(valid.iter().map(|(_, r)| r.clone()).collect());
+    let mut windows: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+    for (i, range) in valid {
+        let centre = (range.start() + range.end()) / 2;
+        let inside = starts.iter().copied().filter(|s| range.contains(s));
+        if let Some(start) = inside.min_by_key(|&s| (s.abs_diff(centre), s)) {
+            windows.entry(start).or_default().push(i);
+        }
+    }
+    windows
+}
+
 impl Window<'_> {
     /// Partly seen tracks with a run of at least the network's frame count of consecutive seen
-    /// frames: a window of that many frames inside the run is embedded with every track seen in
-    /// all of it. The windows are the fewest that give every such track one
-    /// ([`fewest_stabbing`]), and a track takes the one nearest the centre of its run. Where the network's label centroids place the tracks seen throughout
-    /// better than the motion subspaces do over the window's frames (each half of them judged
-    /// by both fitted on the other half), the window's partly seen tracks take the label of
-    /// the nearest centroid.
+    /// frames: a window of that many frames inside the longest run is embedded with every track
+    /// seen in all of it ([`window_starts`]: the fewest windows that give every such track
+    /// one). Where the network's label centroids place the tracks seen throughout better than
+    /// the motion subspaces do over the window's frames (each half of them judged by both
+    /// fitted on the other half), the window's partly seen tracks take the label of the
+    /// nearest centroid.
     fn place(
         &self,
         points: &PointSet,
@@ -657,32 +692,10 @@ impl Window<'_> {
         if width < 2 || width > frames {
             return Ok(());
         }
-        // Each placeable track's valid window starts (inside its longest run).
-        let mut valid: Vec<(usize, RangeInclusive<usize>)> = Vec::new();
-        for i in 0..points.len() {
-            if visibility.throughout(i) || placed.labels[i] < 0 {
-                continue;
-            }
-            let (mut best, mut run) = ((0, 0), 0);
-            for (f, &s) in visibility.seen(i).iter().enumerate() {
-                run = if s { run + 1 } else { 0 };
-                if run > best.1 {
-                    best = (f + 1 - run, run);
-                }
-            }
-            if best.1 >= width {
-                valid.push((i, best.0..=best.0 + best.1 - width));
-            }
-        }
-        let mut windows: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
-        let starts = fewest_stabbing(valid.iter().map(|(_, r)| r.clone()).collect());
-        for (i, range) in valid {
-            let centre = (range.start() + range.end()) / 2;
-            let inside = starts.iter().copied().filter(|s| range.contains(s));
-            if let Some(start) = inside.min_by_key(|&s| (s.abs_diff(centre), s)) {
-                windows.entry(start).or_default().push(i);
-            }
-        }
+        let placeable = (0..points.len())
+            .filter(|&i| !visibility.throughout(i) && placed.labels[i] >= 0)
+            .map(|i| (i, visibility.seen(i)));
+        let windows = window_starts(placeable, width);
         if windows.is_empty() {
             return Ok(());
         }
@@ -887,6 +900,38 @@ impl LoadedModel {
 pub(crate) mod tests {
     use super::*;
     use crate::registry::tests::tiny;
+
+    #[test]
+    fn each_track_gets_a_window_inside_its_longest_run() {
+        let flags = |s: &str| -> Vec<bool> { s.chars().map(|c| c == '1').collect() };
+        let tracks = [
+            flags("0001111111"), // a run ending at the last frame: starts 3..=5
+            flags("1111100000"), // a run exactly the width long: start 0 only
+            flags("1111011110"), // two runs of 4: too short for a window of 5
+            flags("1111101111"), // runs of 5 and 4: the first, start 0
+            flags("0111111000"), // starts 1..=2, centre 1
+        ];
+        let windows = window_starts(tracks.iter().enumerate().map(|(i, t)| (i, &t[..])), 5);
+        let mut got: Vec<(usize, usize)> = windows
+            .iter()
+            .flat_map(|(&s, ts)| ts.iter().map(move |&t| (t, s)))
+            .collect();
+        got.sort_unstable();
+        // Valid starts by right end: 0..=0 (tracks 1, 3), 1..=2 (track 4), 3..=5 (track 0):
+        // the greedy's starts are 0, 2 and 5.
+        assert_eq!(got, vec![(0, 5), (1, 0), (3, 0), (4, 2)]);
+        for (t, s) in got {
+            assert!(tracks[t][s..s + 5].iter().all(|&v| v), "track {t} at {s}");
+        }
+        // Starts 1 and 3 (tracks 0 and 1 have no other); track 2 (starts 0..=4, centre 2) is
+        // as near both and takes the earlier.
+        let tie = [flags("011111000"), flags("000111110"), flags("111111111")];
+        let windows = window_starts(tie.iter().enumerate().map(|(i, t)| (i, &t[..])), 5);
+        assert_eq!(windows.get(&1), Some(&vec![0, 2]));
+        assert_eq!(windows.get(&3), Some(&vec![1]));
+        let none: [Vec<bool>; 0] = [];
+        assert!(window_starts(none.iter().enumerate().map(|(i, t)| (i, &t[..])), 5).is_empty());
+    }
 
     #[test]
     fn the_fewest_window_starts_give_every_track_one() {
