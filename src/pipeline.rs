@@ -241,8 +241,9 @@ impl Embedding {
 /// for a set sparser than training its network for sparse sets alone) times the images (the
 /// input and its images under every combination of `symmetries`). Row i holds the embeddings
 /// of point i by each network of each image of each window (networks vary fastest, windows
-/// slowest), side by side, divided by the square root of c so that it keeps unit length. An image that does not exist (a symmetry that does not apply to the kind, or
-/// coordinates pushed past the accepted range) is left out.
+/// slowest), side by side, divided by the square root of c so that it keeps unit length. An
+/// image that does not exist (a symmetry that does not apply to the kind, or coordinates pushed
+/// past the accepted range) is left out.
 pub fn embed(
     model: &LoadedModel,
     points: &PointSet,
@@ -646,6 +647,7 @@ fn window_starts<'a>(
     tracks: impl Iterator<Item = (usize, &'a [bool])>,
     width: usize,
 ) -> BTreeMap<usize, Vec<usize>> {
+    let width = width.max(1);
     // Each track's valid starts: a run [a, a + L) holds the windows starting at a..=a + L - width.
     let mut valid: Vec<(usize, RangeInclusive<usize>)> = Vec::new();
     for (i, seen) in tracks {
@@ -656,8 +658,8 @@ fn window_starts<'a>(
                 best = (f + 1 - run, run);
             }
         }
-        if best.1 >= width.max(1) {
-            valid.push((i, best.0..=best.0 + best.1 - width.max(1)));
+        if best.1 >= width {
+            valid.push((i, best.0..=best.0 + best.1 - width));
         }
     }
     let starts = fewest_stabbing(valid.iter().map(|(_, r)| r.clone()).collect());

@@ -58,10 +58,10 @@ impl LoadedModel {
 
     /// Hex SHA-256 of the weight files the model was loaded from, concatenated in the card's
     /// order (`cat weights.safetensors weights-1.safetensors ... weights-sparse.safetensors |
-    /// sha256sum`): the identity of
-    /// exactly these weights, which the card's `version` is not. `None` for a network built in
-    /// this process ([`LoadedModel::from_parts`]). The files are read again for the digest after
-    /// the networks are built: replace a model directory while no server is loading it.
+    /// sha256sum`): the identity of exactly these weights, which the card's `version` is not.
+    /// `None` for a network built in this process ([`LoadedModel::from_parts`]). The files are
+    /// read again for the digest after the networks are built: replace a model directory while
+    /// no server is loading it.
     pub fn weights_sha256(&self) -> Option<&str> {
         self.weights_sha256.as_deref()
     }
