@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Trains the models shipped in models/ (the exact commands recorded in each model card).
-# Usage: scripts/train-models.sh [kt3dmoseg] [adelaide-homography] [adelaide-fundamental] [lce]
+# Usage: scripts/train-models.sh [kt3dmoseg] [motion] [adelaide-homography] [adelaide-fundamental] [lce]
 # Each model trains on one thread; run several of these at once to use more cores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -8,7 +8,33 @@ data=${MULTIFIT_DATA:-../shared/datasets}
 T=./target/release/multifit-train
 cargo build --release --bin multifit-train
 export RAYON_NUM_THREADS=${RAYON_NUM_THREADS:-1}
-for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
+# Training writes no serving settings (which frames a trajectory network reads, when fits refine,
+# the validated range, whether it is its kind's default): copy them from the card in git.
+keep_serving() {
+  local name=$1
+  git show "HEAD:models/$name/model.json" > "runs/$name-shipped-card.json"
+  python3 - "$name" <<'PY'
+import json, sys
+name = sys.argv[1]
+shipped = json.load(open(f"runs/{name}-shipped-card.json"))
+card = json.load(open(f"models/{name}/model.json"))
+for key in ("default", "frames", "refine", "refine_from_frames", "outliers", "spacing", "validated"):
+    if key in shipped:
+        card[key] = shipped[key]
+json.dump(card, open(f"models/{name}/model.json", "w"), indent=2)
+PY
+}
+# The synthetic motion pretraining both trajectory models start from, once per run.
+pretrained=
+pretrain_motion() {
+  [ -n "$pretrained" ] && return
+  pretrained=1
+  $T train --name kt-motion-pretrain --out runs/motion-pre/model --run-dir runs/motion-pre \
+    --data "motion:count=8000,seed=101,frames=5" --val "motion:count=100,seed=99,frames=5" \
+    --loss ce --embed-dim 5 --width 128 --depth 12 --neighbors 8 --graph-neighbors 8 \
+    --lr 1e-3 --schedule cosine --epochs 3 --seed 0 --k-max 8
+}
+for model in "${@:-kt3dmoseg motion adelaide-homography adelaide-fundamental lce}"; do
   for m in $model; do
     case $m in
       kt3dmoseg)
@@ -17,15 +43,24 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         # mirrored, reversed in time and both, with CE and local neighbourhoods (offsets to the 8
         # nearest trajectories, graph aggregation over 8): the recipe with the lowest
         # cross-validated error (docs/RESULTS.md, "KT3DMoSeg augment").
-        $T train --name kt-motion-pretrain --out runs/motion-pre/model --run-dir runs/motion-pre \
-          --data "motion:count=8000,seed=101,frames=5" --val "motion:count=100,seed=99,frames=5" \
-          --loss ce --embed-dim 5 --width 128 --depth 12 --neighbors 8 --graph-neighbors 8 \
-          --lr 1e-3 --schedule cosine --epochs 3 --seed 0 --k-max 8
+        pretrain_motion
         $T train --name kt3dmoseg --out models/kt3dmoseg --run-dir runs/kt3dmoseg-pre \
           --data "$data/kt3dmoseg" --protocol augment --clip-len 5 --clip-stride 1 --symmetry mirror,reverse --seed 0 \
           --loss ce --embed-dim 5 --width 128 --depth 12 --neighbors 8 --graph-neighbors 8 \
           --lr 1e-3 --schedule cosine --epochs 6 --k-max 8 --init runs/motion-pre/model \
-          --describe "KT3DMoSeg, all 22 sequences, 'Augment' protocol with overlapping clips: every 5-frame clip (296 clips), each also mirrored, reversed in time, and both; started from a network pretrained on 8000 synthetic 5-frame motion clips (gen-motion defaults, seed 101, 3 epochs, CE)" ;;
+          --describe "KT3DMoSeg, all 22 sequences, 'Augment' protocol with overlapping clips: every 5-frame clip (296 clips), each also mirrored, reversed in time, and both; started from a network pretrained on 8000 synthetic 5-frame motion clips (gen-motion defaults, seed 101, 3 epochs, CE)"
+        keep_serving kt3dmoseg ;;
+      motion)
+        # The default for tracks: the same pretraining and recipe as kt3dmoseg, with 150
+        # synthetic clips mixed into the fine-tuning, which keeps what pretraining taught about
+        # cameras other than KITTI's (docs/RESULTS.md, "A general trajectory model").
+        pretrain_motion
+        $T train --name motion --out models/motion --run-dir runs/kt-mix \
+          --data "$data/kt3dmoseg" --data "motion:count=150,seed=303,frames=5" --protocol augment --clip-len 5 --clip-stride 1 --symmetry mirror,reverse --seed 0 \
+          --loss ce --embed-dim 5 --width 128 --depth 12 --neighbors 8 --graph-neighbors 8 \
+          --lr 1e-3 --schedule cosine --epochs 6 --k-max 8 --init runs/motion-pre/model \
+          --describe "KT3DMoSeg, all 22 sequences, 'Augment' protocol with overlapping clips: every 5-frame clip (296 clips), each also mirrored, reversed in time, and both, with 150 synthetic 5-frame motion clips (gen-motion defaults, seed 303) mixed in; started from a network pretrained on 8000 synthetic 5-frame motion clips (gen-motion defaults, seed 101, 3 epochs, CE)"
+        keep_serving motion ;;
       adelaide-homography)
         # Pretrained on synthetic two-view homographies (gen-twoview defaults), then a short
         # fine-tuning on the 17 pairs (10 epochs, lr 1e-4): lower leave-one-out error than 100
@@ -157,16 +192,7 @@ for model in "${@:-kt3dmoseg adelaide-homography adelaide-fundamental lce}"; do
         # Stage 42's card has no serving settings: the training spacing, refinement, outliers and
         # validated range were set on the shipped card after training (docs/RESULTS.md, "Robustness
         # grid"); copy them from the card in git before joining the network for sparse sets.
-        git show HEAD:models/lce/model.json > runs/lce-shipped-card.json
-        python3 - <<'PY'
-import json
-shipped = json.load(open("runs/lce-shipped-card.json"))
-card = json.load(open("models/lce/model.json"))
-for key in ("spacing", "refine", "outliers", "validated"):
-    if key in shipped:
-        card[key] = shipped[key]
-json.dump(card, open("models/lce/model.json", "w"), indent=2)
-PY
+        keep_serving lce
         $T sparse --model models/lce --network runs/lce-grid-g3/model --above 1.25 --out runs/lce-sparse
         rm -rf models/lce && mv runs/lce-sparse models/lce ;;
       *) echo "unknown model $m" >&2; exit 2 ;;

@@ -95,7 +95,8 @@ fn fused_forward_matches_burn_on_every_shipped_model() {
             "adelaide-fundamental",
             "adelaide-homography",
             "kt3dmoseg",
-            "lce"
+            "lce",
+            "motion"
         ],
         "every shipped model is checked"
     );

@@ -70,6 +70,7 @@ fn tracks_of_every_length_are_fitted_with_structures_on_every_frame() {
         .map(|(r, _)| r)
         .collect();
     assert!(frames > 5 && rows.len() > 20);
+    let mut outcomes = std::collections::BTreeSet::new();
     for f in [2, 3, 8, frames] {
         let cut: Vec<Vec<f64>> = rows
             .iter()
@@ -89,7 +90,14 @@ fn tracks_of_every_length_are_fitted_with_structures_on_every_frame() {
             check_fit(&v, cut.len()),
             v["structures"].as_array().unwrap().len()
         );
-        // kt3dmoseg was validated on 5 to 20 frames: other lengths are answered with a warning.
+        // The answering model's card names the frames it was validated on: other lengths are
+        // answered with a warning.
+        let card = server.get(&format!(
+            "/v1/models/{}",
+            v["model"]["name"].as_str().unwrap()
+        ));
+        let range = card.json()["validated"]["frames"].clone();
+        let (lo, hi) = (range[0].as_u64().unwrap(), range[1].as_u64().unwrap());
         let warned = v["warnings"]
             .as_array()
             .unwrap()
@@ -97,10 +105,11 @@ fn tracks_of_every_length_are_fitted_with_structures_on_every_frame() {
             .any(|w| w.as_str().unwrap().starts_with("frames"));
         assert_eq!(
             warned,
-            !(5..=20).contains(&f),
+            !(lo..=hi).contains(&(f as u64)),
             "{f} frames: {}",
             v["warnings"]
         );
+        outcomes.insert(warned);
         let structures = v["structures"].as_array().unwrap();
         for s in structures {
             // Structures are fitted on every frame sent, not only those the network reads; a
@@ -116,6 +125,8 @@ fn tracks_of_every_length_are_fitted_with_structures_on_every_frame() {
             "{f} frames: {v}"
         );
     }
+    // Lengths inside and outside the validated range were both sent.
+    assert_eq!(outcomes.len(), 2);
 }
 
 /// For each track of a `visible` mask, the frames it was seen in.
@@ -204,7 +215,16 @@ fn fits_a_real_kt3dmoseg_sequence() {
     let server = Server::start(&[]);
     let file = dataset("kt3dmoseg_first5/Seq009_Clip01.json");
     let n = file["points"].as_array().unwrap().len();
-    let auto = server.post_json("/v1/fit", &fit_body(&file, json!({})));
+    // Tracks that name no model go to the default for trajectories, the general `motion`.
+    let default = server.post_json("/v1/fit", &fit_body(&file, json!({})));
+    assert_eq!(default.status, 200, "{}", default.text());
+    assert_eq!(default.json()["model"]["name"], "motion");
+    let kt = |extra: Value| {
+        let mut body = fit_body(&file, extra);
+        body["model"] = json!("kt3dmoseg");
+        body
+    };
+    let auto = server.post_json("/v1/fit", &kt(json!({})));
     assert_eq!(auto.status, 200, "{}", auto.text());
     let v = auto.json();
     assert_eq!(v["model"]["name"], "kt3dmoseg");
@@ -218,26 +238,20 @@ fn fits_a_real_kt3dmoseg_sequence() {
     assert_eq!(v["selection"], "sod");
 
     // Known K: the shipped model separates the motions far better than chance.
-    let known = server.post_json(
-        "/v1/fit",
-        &fit_body(&file, json!({"k": file["num_models"], "seed": 3})),
-    );
+    let known = server.post_json("/v1/fit", &kt(json!({"k": file["num_models"], "seed": 3})));
     assert_eq!(known.status, 200);
     let err = error_rate(&truth(&file), &labels(&known.json()));
     assert!(err < 0.25, "error {err}");
 
     // Same input and seed, same answer; the trajectory-matrix layout gives the same labels.
-    let again = server.post_json(
-        "/v1/fit",
-        &fit_body(&file, json!({"k": file["num_models"], "seed": 3})),
-    );
+    let again = server.post_json("/v1/fit", &kt(json!({"k": file["num_models"], "seed": 3})));
     assert_eq!(labels(&again.json()), labels(&known.json()));
     let rows = file["points"].as_array().unwrap();
     let matrix: Vec<Vec<f64>> = (0..10)
         .map(|c| rows.iter().map(|r| r[c].as_f64().unwrap()).collect())
         .collect();
     let body = json!({"kind": "trajectories", "trajectory_matrix": matrix, "image_size": file["image_size"],
-                      "k": file["num_models"], "seed": 3});
+                      "k": file["num_models"], "seed": 3, "model": "kt3dmoseg"});
     let m = server.post_json("/v1/fit", &body);
     assert_eq!(m.status, 200, "{}", m.text());
     assert_eq!(labels(&m.json()), labels(&known.json()));
@@ -504,6 +518,7 @@ fn models_health_metrics_and_openapi() {
         "adelaide-homography",
         "kt3dmoseg",
         "lce",
+        "motion",
     ] {
         assert!(names.contains(&want), "{names:?}");
     }

@@ -550,6 +550,25 @@ fn error_codes_are_distinct_errors() {
     }
 }
 
+/// A request that names no model is answered by its kind's default: the card marked `default`,
+/// else the first of the kind by name.
+#[tokio::test]
+async fn a_request_without_a_model_gets_the_kinds_default() {
+    for (marked, expected) in [(None, "a-tracks"), (Some("b-tracks"), "b-tracks")] {
+        let state = Arc::new(AppState::new(LIMITS, 1, 4, Duration::from_secs(5)));
+        let mut models = BTreeMap::new();
+        for name in ["a-tracks", "b-tracks"] {
+            let mut model = tiny(name, Kind::Trajectories, 4);
+            model.card.default = marked == Some(name);
+            models.insert(name.to_string(), model);
+        }
+        state.set_models(models);
+        let (status, _, body) = send(&service(&state), post(&good())).await;
+        assert_eq!(status, StatusCode::OK, "{body}");
+        assert_eq!(body["model"]["name"], expected, "marked {marked:?}");
+    }
+}
+
 fn rejections(state: &AppState, reason: &str) -> u64 {
     state
         .telemetry

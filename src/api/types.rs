@@ -87,13 +87,17 @@ pub struct FitJob {
     pub visibility: Option<Visibility>,
 }
 
-/// The shipped model used for a kind when the request names none: the first (by name) whose
-/// card has that kind.
+/// The shipped model used for a kind when the request names none: the one whose card says it
+/// is the kind's default, else the first (by name) of that kind.
 pub fn default_model(
     models: &BTreeMap<String, Arc<LoadedModel>>,
     kind: Kind,
 ) -> Option<&Arc<LoadedModel>> {
-    models.values().find(|m| m.card.kind == kind)
+    let mut of_kind = models.values().filter(|m| m.card.kind == kind);
+    of_kind
+        .clone()
+        .find(|m| m.card.default)
+        .or_else(|| of_kind.next())
 }
 
 impl FitRequest {

@@ -117,6 +117,10 @@ pub struct ModelCard {
     /// Default K selection (`sod` or `silhouette`).
     pub selection: Selection,
     pub training: TrainingInfo,
+    /// Served to requests of this kind that name no model. At most one card of a kind says
+    /// so; without one, the first of the kind by name is served.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub default: bool,
     /// Test-time symmetries: the input's images under every combination of these are embedded
     /// too, and each point's embeddings are concatenated (scaled to unit length) before
     /// clustering. Empty: the input alone, as in the paper.
@@ -370,6 +374,7 @@ pub fn card_for(
         k_max,
         selection: crate::cluster::Selection::Sod,
         training,
+        default: false,
         test_symmetries: vec![],
         members: vec![],
         frames: FrameSampling::default(),

@@ -195,13 +195,28 @@ pub fn load_all(root: &Path) -> Result<BTreeMap<String, LoadedModel>, RegistryEr
             path: root.to_path_buf(),
         });
     }
+    let defaults: Vec<&ModelCard> = models
+        .values()
+        .map(|m| &m.card)
+        .filter(|c| c.default)
+        .collect();
+    for (i, first) in defaults.iter().enumerate() {
+        if let Some(second) = defaults[i + 1..].iter().find(|c| c.kind == first.kind) {
+            return Err(RegistryError::TwoDefaults {
+                kind: first.kind,
+                first: first.name.clone(),
+                second: second.name.clone(),
+            });
+        }
+    }
     Ok(models)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::registry::tests::{scratch, tiny_seeded, two_saved_models};
+    use crate::data::Kind;
+    use crate::registry::tests::{save, scratch, tiny_model, tiny_seeded, two_saved_models};
     use crate::registry::{Member, write_ensemble};
 
     #[test]
@@ -231,6 +246,34 @@ mod tests {
             weights_sha256(tmp.path(), &card),
             Err(RegistryError::Io { path, .. }) if path.ends_with("weights-1.safetensors")
         ));
+    }
+
+    #[test]
+    fn two_defaults_of_one_kind_are_refused_and_one_per_kind_is_served() {
+        let tmp = scratch("defaults");
+        let names = ["a", "b", "c"];
+        let save_all = |defaults: [bool; 3], kinds: [Kind; 3]| {
+            for (i, name) in names.iter().enumerate() {
+                let input_dim = if kinds[i] == Kind::Points2d { 2 } else { 4 };
+                let mut model = tiny_model(name, kinds[i], input_dim, 7);
+                model.card.default = defaults[i];
+                save(&model, &tmp.path().join(name));
+            }
+        };
+        let (t, p) = (Kind::Trajectories, Kind::Points2d);
+        save_all([true, false, true], [t, t, t]);
+        match load_all(tmp.path()) {
+            Err(RegistryError::TwoDefaults {
+                kind,
+                first,
+                second,
+            }) => assert_eq!((kind, first.as_str(), second.as_str()), (t, "a", "c")),
+            other => panic!("expected TwoDefaults, got {:?}", other.map(|m| m.len())),
+        }
+        save_all([true, false, true], [t, t, p]);
+        let models = load_all(tmp.path()).unwrap();
+        assert!(models["a"].card.default && models["c"].card.default);
+        assert!(!models["b"].card.default);
     }
 
     #[test]

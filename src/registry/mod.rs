@@ -34,6 +34,12 @@ pub enum RegistryError {
     Empty { path: PathBuf },
     #[error("two model directories are named {name:?}")]
     Duplicate { name: String },
+    #[error("models {first:?} and {second:?} are both the default for {kind}")]
+    TwoDefaults {
+        kind: crate::data::Kind,
+        first: String,
+        second: String,
+    },
     #[error("cannot make an ensemble: {0}")]
     Ensemble(String),
 }
