@@ -18,7 +18,7 @@ import json, sys
 name = sys.argv[1]
 shipped = json.load(open(f"runs/{name}-shipped-card.json"))
 card = json.load(open(f"models/{name}/model.json"))
-for key in ("default", "frames", "refine", "refine_from_frames", "outliers", "spacing", "validated"):
+for key in ("default", "frames", "refine", "refine_from_frames", "outliers", "refine_stay", "spacing", "validated"):
     if key in shipped:
         card[key] = shipped[key]
 json.dump(card, open(f"models/{name}/model.json", "w"), indent=2)

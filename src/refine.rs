@@ -6,7 +6,11 @@
 //! [`MAX_ITERATIONS`] rounds:
 //!
 //! 1. every point goes to the structure with the smallest residual r_j(x) (a geometric distance
-//!    in the caller's units: all structures of a fit measure in the same units);
+//!    in the caller's units: all structures of a fit measure in the same units), except that a
+//!    point whose residual to its current structure is within `stay` × σ
+//!    ([`RefineParams::stay`], the model card's `refine_stay`, capped at τ) keeps it: within
+//!    the noise the geometry cannot tell the structures apart, and the learned label carries
+//!    what it saw;
 //! 2. a point whose smallest residual exceeds the outlier threshold τ is labelled −1 (when
 //!    outliers are allowed);
 //! 3. every structure is fitted again on its points, keeping its model type (a line stays a
@@ -83,6 +87,9 @@ pub struct RefineParams {
     /// Whether models proposed beyond the learned groups may replace them
     /// ([`hypotheses`]; never for motion subspaces).
     pub hypotheses: bool,
+    /// A point stays with its structure while its residual there is within this many σ, even
+    /// where another structure is nearer; 0: every point goes to the nearest.
+    pub stay: f64,
 }
 
 impl Default for RefineParams {
@@ -91,6 +98,7 @@ impl Default for RefineParams {
             outliers: true,
             threshold: None,
             hypotheses: true,
+            stay: 0.0,
         }
     }
 }
@@ -213,6 +221,7 @@ pub fn refine_on(
             .threshold
             .unwrap_or(OUTLIER_SIGMAS * sigma)
             .max(f64::MIN_POSITIVE);
+        let stay = (params.stay * sigma).min(threshold);
         if params.hypotheses && family != Family::Subspace {
             let live: Vec<Option<&Model>> = groups
                 .iter()
@@ -246,7 +255,7 @@ pub fn refine_on(
                 &current,
                 &groups,
                 params.outliers,
-                threshold,
+                (threshold, stay),
                 threads,
             );
             if next == current {
@@ -319,7 +328,7 @@ pub fn refine_on(
             &current,
             &groups,
             params.outliers,
-            threshold,
+            (threshold, stay),
             threads,
         );
         answer(points, current, groups, sigma)
@@ -350,14 +359,15 @@ fn noise_level(groups: &[Option<Group>]) -> f64 {
     s[(s.len() - 1) / 2]
 }
 
-/// Every point to its nearest live structure (−1 past `threshold` when outliers are allowed);
-/// points of frozen groups stay.
+/// Every point to its nearest live structure (−1 past `threshold` when outliers are allowed),
+/// except that a point within `stay` of its current live structure keeps it; points of frozen
+/// groups stay.
 fn assign(
     points: &PointSet,
     current: &[i64],
     groups: &[Option<Group>],
     outliers: bool,
-    threshold: f64,
+    (threshold, stay): (f64, f64),
     threads: &Threads,
 ) -> Vec<i64> {
     let live: Vec<(usize, &Model)> = groups
@@ -376,6 +386,13 @@ fn assign(
             return if frozen || !outliers { here } else { -1 };
         }
         let row = points.row(i);
+        if stay > 0.0
+            && here >= 0
+            && let Some((_, m)) = live.iter().find(|&&(j, _)| j as i64 == here)
+            && m.residual(row) <= stay
+        {
+            return here;
+        }
         let (j, r) = live
             .iter()
             .map(|&(j, m)| (j, m.residual(row)))
@@ -615,6 +632,62 @@ mod tests {
             }
             assert!(finite(&alone));
         }
+    }
+
+    /// A line y = y0 as a live group.
+    fn line_group(y0: f64) -> Option<Group> {
+        Some(Group {
+            fit: geometry::Fit {
+                model: Model::Line {
+                    a: 0.0,
+                    b: 1.0,
+                    c: -y0,
+                },
+                rms: 0.0,
+                inliers: Vec::new(),
+                sigma: 0.1,
+            },
+            fitted_on: Vec::new(),
+            type_chosen: true,
+            start: 1,
+            frozen: false,
+        })
+    }
+
+    #[test]
+    fn a_point_within_the_stay_radius_keeps_its_structure() {
+        // Lines y = 0 and y = 1; every point starts with the line y = 1.
+        let groups = [line_group(0.0), line_group(1.0)];
+        let points =
+            PointSet::from_flat(Kind::Points2d, 2, vec![0.0, 0.45, 0.0, 0.2, 0.0, -3.0]).unwrap();
+        let current = [1, 1, 1];
+        let threads = Threads::default();
+        let with = |stay: f64| assign(&points, &current, &groups, true, (2.5, stay), &threads);
+        // Nearest: the first two go to y = 0; the third is past the threshold from both lines.
+        assert_eq!(with(0.0), [0, 0, -1]);
+        // Within 0.6 of y = 1 the first stays (0.55 away), the second (0.8) does not.
+        assert_eq!(with(0.6), [1, 0, -1]);
+        assert_eq!(with(0.5), [0, 0, -1]);
+    }
+
+    #[test]
+    fn the_stay_radius_never_keeps_a_point_past_the_outlier_threshold() {
+        // A caller's threshold below the stay radius: the far points are still outliers.
+        let (points, truth) = two_circles(40, 0.01);
+        let mut values = points.values().to_vec();
+        values.extend([5.0, 8.0, -4.0, -6.0]);
+        let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
+        let mut start = truth.clone();
+        start.extend([0, 1]);
+        let params = RefineParams {
+            threshold: Some(0.5),
+            stay: 1e6,
+            ..RefineParams::default()
+        };
+        let r = refine(&points, &start, 2, Family::Curves, &params, None);
+        assert_eq!(&r.labels[80..], &[-1, -1]);
+        let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
+        assert_eq!(&r.labels[..80], &want[..]);
     }
 
     #[test]

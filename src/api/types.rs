@@ -241,7 +241,7 @@ impl FitRequest {
                 Some(RefineParams {
                     outliers: outliers.unwrap_or(threshold.is_some() || model.card.outliers),
                     threshold,
-                    hypotheses: true,
+                    ..model.card.refine_params()
                 })
             }
         };

@@ -13,6 +13,7 @@ use crate::data::{Kind, Normalization, PointSet, Symmetry};
 use crate::geometry::Family;
 use crate::loss::Loss;
 use crate::model::{ModelConfig, ModelError};
+use crate::refine::RefineParams;
 
 /// File names inside a model directory.
 pub const CARD_FILE: &str = "model.json";
@@ -51,6 +52,8 @@ pub enum CardError {
     SparseWithoutSpacing,
     #[error("sparse: above must be a finite ratio of at least 1, got {0}")]
     SparseAbove(f64),
+    #[error("refine_stay must be a finite number of noise levels, at least 0, got {0}")]
+    RefineStay(f64),
     #[error(transparent)]
     Architecture(ModelError),
 }
@@ -145,6 +148,10 @@ pub struct ModelCard {
     /// outliers, such as tracks, is better served without).
     #[serde(default = "yes")]
     pub outliers: bool,
+    /// Refinement keeps a point with its structure while it fits it within this many σ, even
+    /// where another structure is nearer ([`RefineParams::stay`]); 0: always the nearest.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub refine_stay: f64,
     /// The models a structure may follow; default by kind: curves for points2d, fundamental
     /// (or homography where GRIC prefers it) for correspondences, subspaces for trajectories.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -171,6 +178,10 @@ pub struct ModelCard {
 
 fn yes() -> bool {
     true
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 /// The inputs a model was validated on: every bound inclusive, every field optional.
@@ -247,6 +258,17 @@ impl ModelCard {
         self.refine || self.refine_from_frames.is_some_and(long)
     }
 
+    /// How fits of this model refine by default: its outliers and stay settings, the outlier
+    /// threshold from the data, hypotheses on.
+    pub fn refine_params(&self) -> RefineParams {
+        RefineParams {
+            outliers: self.outliers,
+            threshold: None,
+            hypotheses: true,
+            stay: self.refine_stay,
+        }
+    }
+
     /// The models a structure of this model may follow.
     pub fn family(&self) -> Family {
         self.geometry.unwrap_or(match self.kind {
@@ -307,6 +329,9 @@ impl ModelCard {
             if files[..i].contains(file) {
                 return Err(CardError::WeightsTwice(file.to_string()));
             }
+        }
+        if !(self.refine_stay.is_finite() && self.refine_stay >= 0.0) {
+            return Err(CardError::RefineStay(self.refine_stay));
         }
         if let Some(sparse) = &self.sparse {
             let spacing = self.spacing.unwrap_or(f64::NAN);
@@ -381,6 +406,7 @@ pub fn card_for(
         refine: false,
         refine_from_frames: None,
         outliers: true,
+        refine_stay: 0.0,
         geometry: None,
         spacing: None,
         sparse: None,
@@ -419,6 +445,26 @@ mod tests {
         );
         card.test_symmetries = vec![Symmetry::Mirror];
         card.validate().unwrap();
+    }
+
+    #[test]
+    fn the_stay_setting_reaches_refinement_and_bad_values_are_refused() {
+        let mut card = tiny(vec![]).card;
+        assert_eq!(card.refine_params().stay, 0.0);
+        card.refine_stay = 1.0;
+        card.validate().unwrap();
+        assert_eq!(card.refine_params().stay, 1.0);
+        assert_eq!(card.refine_params().outliers, card.outliers);
+        for bad in [-0.5, f64::NAN, f64::INFINITY] {
+            card.refine_stay = bad;
+            assert!(
+                card.validate()
+                    .unwrap_err()
+                    .to_string()
+                    .contains("refine_stay"),
+                "{bad}"
+            );
+        }
     }
 
     #[test]

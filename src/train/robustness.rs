@@ -344,9 +344,8 @@ fn eval_settings(
         restarts,
         seed: 0,
         refine: Some(crate::refine::RefineParams {
-            outliers: card.outliers,
-            threshold: None,
             hypotheses,
+            ..card.refine_params()
         }),
         from_truth: false,
     }

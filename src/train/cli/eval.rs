@@ -181,8 +181,8 @@ pub fn run(job: &EvalJob) -> Result<Evaluated, CliError> {
         outliers: job
             .outliers
             .map_or(model.card.outliers, |o| o == Switch::On),
-        threshold: None,
         hypotheses: job.hypotheses != Some(Switch::Off),
+        ..model.card.refine_params()
     };
     // Without `--refine`, each sample refines as a fit of it would by default.
     let settings = |s: &Sample| EvalSettings {
