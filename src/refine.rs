@@ -567,6 +567,18 @@ mod tests {
         )
     }
 
+    /// [`two_circles`] (40 points each, noise 0.01) and two far points at (5, 8) and (-4, -6),
+    /// started in groups 0 and 1: the points, the start labels and the circles' true labels.
+    fn two_circles_and_two_far_points() -> (PointSet, Vec<usize>, Vec<usize>) {
+        let (points, truth) = two_circles(40, 0.01);
+        let mut values = points.values().to_vec();
+        values.extend([5.0, 8.0, -4.0, -6.0]);
+        let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
+        let mut start = truth.clone();
+        start.extend([0, 1]);
+        (points, start, truth)
+    }
+
     fn finite(refined: &Refined) -> bool {
         refined.sigma.is_finite()
             && refined.structures.iter().all(|s| {
@@ -673,12 +685,7 @@ mod tests {
     #[test]
     fn the_stay_radius_never_keeps_a_point_past_the_outlier_threshold() {
         // A caller's threshold below the stay radius: the far points are still outliers.
-        let (points, truth) = two_circles(40, 0.01);
-        let mut values = points.values().to_vec();
-        values.extend([5.0, 8.0, -4.0, -6.0]);
-        let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
-        let mut start = truth.clone();
-        start.extend([0, 1]);
+        let (points, start, truth) = two_circles_and_two_far_points();
         let params = RefineParams {
             threshold: Some(0.5),
             stay: 1e6,
@@ -692,12 +699,7 @@ mod tests {
 
     #[test]
     fn far_points_are_outliers_unless_outliers_are_off() {
-        let (points, truth) = two_circles(40, 0.01);
-        let mut values = points.values().to_vec();
-        values.extend([5.0, 8.0, -4.0, -6.0]);
-        let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
-        let mut start = truth.clone();
-        start.extend([0, 1]);
+        let (points, start, _) = two_circles_and_two_far_points();
         let r = refine(
             &points,
             &start,
