@@ -25,7 +25,7 @@ It does the same work as the Rust server for one point set:
    beyond 3000, like the server) or by the SOD of log r(K); K = 1 when r(1)/N < 0.01.
 
 The peer has no geometric refinement (the server's stage 5): where the server refines by
-default (tracks of 15 frames or more for `kt3dmoseg`, `lce`, `adelaide-homography`), it does
+default (tracks of 15 frames or more for `kt3dmoseg` and `motion`, `lce`, `adelaide-homography`), it does
 more work than the peer, and its labels may differ where refinement moved points.
 
 The random streams differ from the server's (ChaCha8 there, numpy's Mersenne Twister here), so the

@@ -217,7 +217,7 @@ echo "# multifit smoke test against $base"
 check_get "GET /health/live is 200" /health/live 200 status live
 check_get "GET /health/ready is 200" /health/ready 200 status ready
 check_get "GET /v1/models lists the shipped models" /v1/models 200 \
-  models adelaide-fundamental adelaide-homography kt3dmoseg lce
+  models adelaide-fundamental adelaide-homography kt3dmoseg lce motion
 check_get "GET /v1/models/kt3dmoseg is a trajectories card" /v1/models/kt3dmoseg 200 \
   card kt3dmoseg trajectories
 check_get "GET /v1/models/nope is 404 not_found" /v1/models/nope 404 error not_found

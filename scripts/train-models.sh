@@ -9,7 +9,9 @@ T=./target/release/multifit-train
 cargo build --release --bin multifit-train
 export RAYON_NUM_THREADS=${RAYON_NUM_THREADS:-1}
 # Training writes no serving settings (which frames a trajectory network reads, when fits refine,
-# the validated range, whether it is its kind's default): copy them from the card in git.
+# the validated range, whether it is its kind's default): copy them from the card in git. The
+# metrics are not copied: they belong to the weights that were measured, so a retrained card
+# records them again (docs/TRAINING.md).
 keep_serving() {
   local name=$1
   git show "HEAD:models/$name/model.json" > "runs/$name-shipped-card.json"
@@ -71,7 +73,8 @@ for model in "${@:-kt3dmoseg motion adelaide-homography adelaide-fundamental lce
         $T train --name adelaide-homography --out models/adelaide-homography --run-dir runs/ah-twoview \
           --data "$data/adelaidermf" --model-type homography --init runs/twoview-h-pre/model \
           --loss mimi --embed-dim 8 --width 128 --depth 12 --lr 1e-4 --schedule cosine --epochs 10 --k-max 8 \
-          --describe "AdelaideRMF homography (planes), all 17 available pairs, outliers as one more group; started from a network pretrained on 4000 synthetic two-view homography pairs (gen-twoview defaults, seed 201, 3 epochs, MIMI)" ;;
+          --describe "AdelaideRMF homography (planes), all 17 available pairs, outliers as one more group; started from a network pretrained on 4000 synthetic two-view homography pairs (gen-twoview defaults, seed 201, 3 epochs, MIMI)"
+        keep_serving adelaide-homography ;;
       adelaide-fundamental)
         # Pretrained on synthetic two-view rigid motions (gen-twoview defaults), then a short
         # fine-tuning on the 19 pairs (10 epochs, lr 1e-4), with local neighbourhoods: lower
@@ -84,7 +87,8 @@ for model in "${@:-kt3dmoseg motion adelaide-homography adelaide-fundamental lce
           --data "$data/adelaidermf" --model-type fundamental --init runs/twoview-f-pre/model \
           --loss mimi --embed-dim 6 --width 128 --depth 12 --neighbors 8 --graph-neighbors 8 \
           --lr 1e-4 --schedule cosine --epochs 10 --k-max 8 \
-          --describe "AdelaideRMF fundamental (rigid motions), all 19 pairs, outliers as one more group; started from a network pretrained on 4000 synthetic two-view fundamental pairs (gen-twoview fundamental, seed 301, 3 epochs, MIMI)" ;;
+          --describe "AdelaideRMF fundamental (rigid motions), all 19 pairs, outliers as one more group; started from a network pretrained on 4000 synthetic two-view fundamental pairs (gen-twoview fundamental, seed 301, 3 epochs, MIMI)"
+        keep_serving adelaide-fundamental ;;
       lce)
         # Scale 2: the generator scale at which sequential RANSAC told the true types and counts
         # scores what the paper's Seq. baselines do (docs/RESULTS.md, "LCE").
@@ -189,9 +193,10 @@ for model in "${@:-kt3dmoseg motion adelaide-homography adelaide-fundamental lce
         grid 1 71 models/lce
         grid 2 72 runs/lce-grid-g1/model
         grid 3 73 runs/lce-grid-g2/model
-        # Stage 42's card has no serving settings: the training spacing, refinement, outliers and
-        # validated range were set on the shipped card after training (docs/RESULTS.md, "Robustness
-        # grid"); copy them from the card in git before joining the network for sparse sets.
+        # Stage 42's card has no serving settings: the training spacing, refinement, outliers, stay
+        # radius and validated range were set on the shipped card after training (docs/RESULTS.md,
+        # "Robustness grid"); copy them from the card in git before joining the network for sparse
+        # sets.
         keep_serving lce
         $T sparse --model models/lce --network runs/lce-grid-g3/model --above 1.25 --out runs/lce-sparse
         rm -rf models/lce && mv runs/lce-sparse models/lce ;;

@@ -10,7 +10,8 @@
 //!    point whose residual to its current structure is within `stay` × σ
 //!    ([`RefineParams::stay`], the model card's `refine_stay`, capped at τ) keeps it: within
 //!    the noise the geometry cannot tell the structures apart, and the learned label carries
-//!    what it saw;
+//!    what it saw (a structure the hypotheses stage swapped in keeps, in the first round, the
+//!    learned points that fit it so closely);
 //! 2. a point whose smallest residual exceeds the outlier threshold τ is labelled −1 (when
 //!    outliers are allowed);
 //! 3. every structure is fitted again on its points, keeping its model type (a line stays a
@@ -625,24 +626,29 @@ mod tests {
         // Mixed and split groups: rounds that move points, hypotheses and (K chosen) merging.
         let start: Vec<usize> = (0..180).map(|i| (i / 7 + i % 3) % 4).collect();
         for k_chosen in [Some(8), None] {
-            let run = |threads: &Threads| {
-                let params = RefineParams::default();
-                refine_on(
-                    &points,
-                    &start,
-                    4,
-                    Family::Curves,
-                    &params,
-                    k_chosen,
-                    threads,
-                )
-            };
-            let alone = run(&Threads::default());
-            for count in [2, 3] {
-                let spread = run(&Threads::new(count).unwrap());
-                assert_eq!(spread, alone, "{count} threads, {k_chosen:?}");
+            for stay in [0.0, 1.0] {
+                let run = |threads: &Threads| {
+                    let params = RefineParams {
+                        stay,
+                        ..RefineParams::default()
+                    };
+                    refine_on(
+                        &points,
+                        &start,
+                        4,
+                        Family::Curves,
+                        &params,
+                        k_chosen,
+                        threads,
+                    )
+                };
+                let alone = run(&Threads::default());
+                for count in [2, 3] {
+                    let spread = run(&Threads::new(count).unwrap());
+                    assert_eq!(spread, alone, "{count} threads, {k_chosen:?}, stay {stay}");
+                }
+                assert!(finite(&alone));
             }
-            assert!(finite(&alone));
         }
     }
 
@@ -680,6 +686,18 @@ mod tests {
         // Within 0.6 of y = 1 the first stays (0.55 away), the second (0.8) does not.
         assert_eq!(with(0.6), [1, 0, -1]);
         assert_eq!(with(0.5), [0, 0, -1]);
+
+        // An outlier (-1), a point of a dropped group (slot 2, None) and a point of a frozen
+        // group (slot 3) at y = 0.45: the first two go to the nearest line whatever the radius,
+        // the frozen group keeps its point.
+        let mut frozen = line_group(0.45);
+        frozen.as_mut().unwrap().frozen = true;
+        let groups = [line_group(0.0), line_group(1.0), None, frozen];
+        let points = PointSet::from_flat(Kind::Points2d, 2, [0.0, 0.45].repeat(3)).unwrap();
+        for stay in [0.0, 0.6, 10.0] {
+            let got = assign(&points, &[-1, 2, 3], &groups, true, (2.5, stay), &threads);
+            assert_eq!(got, [0, 0, 3], "stay {stay}");
+        }
     }
 
     #[test]

@@ -177,6 +177,9 @@ pub struct Report {
     /// Whether fits were scored after the card's geometric refinement.
     #[serde(default)]
     pub refine: bool,
+    /// The card's stay radius in refinement (σ; 0: nearest structure).
+    #[serde(default)]
+    pub refine_stay: f64,
     pub settings: GridSettings,
     /// The factor columns, in table order.
     pub columns: Vec<String>,
@@ -321,6 +324,7 @@ pub fn run(
         selection: card.selection.name().to_string(),
         k_max,
         refine: refine_of(&card),
+        refine_stay: card.refine_stay,
         settings: settings.clone(),
         columns,
         reference,
@@ -1157,6 +1161,7 @@ mod tests {
             selection: "sod".into(),
             k_max: 6,
             refine: false,
+            refine_stay: 0.0,
             settings: GridSettings::default(),
             columns: vec!["scale".into(), "similarity".into()],
             reference: "a".into(),
