@@ -249,16 +249,19 @@ pub fn refine_on(
             let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
             geometry::fit_type(type_name, &rows).unwrap_or_else(|| fit_on(idx))
         };
-        let mut moved = false;
-        for _ in 0..MAX_ITERATIONS {
-            let next = assign(
+        let reassign = |current: &[i64], groups: &[Option<Group>]| {
+            assign(
                 points,
-                &current,
-                &groups,
+                current,
+                groups,
                 params.outliers,
                 (threshold, stay),
                 threads,
-            );
+            )
+        };
+        let mut moved = false;
+        for _ in 0..MAX_ITERATIONS {
+            let next = reassign(&current, &groups);
             if next == current {
                 break;
             }
@@ -324,14 +327,7 @@ pub fn refine_on(
             );
         }
         // Points of dropped groups that the last round did not move.
-        let current = assign(
-            points,
-            &current,
-            &groups,
-            params.outliers,
-            (threshold, stay),
-            threads,
-        );
+        let current = reassign(&current, &groups);
         answer(points, current, groups, sigma)
     })
 }
