@@ -50,6 +50,16 @@ pub enum FitError {
         expected: usize,
         found: usize,
     },
+    #[error(
+        "k = {k} is more than the {read} points model {model} reads from these {n}: it thins a \
+         set denser than its training data before reading it"
+    )]
+    KAboveRead {
+        model: String,
+        k: usize,
+        read: usize,
+        n: usize,
+    },
     #[error(transparent)]
     Cluster(#[from] ClusterError),
     #[error("input: {0}")]
@@ -395,12 +405,42 @@ pub fn fit(
     }
     let t0 = Instant::now();
     let embedding = embed(model, points, image, symmetries, params.seed())?;
+    let read = embedding.values.len() / embedding.width.max(1);
+    if let Selection::Fixed(k) = params.selection()
+        && k > read
+    {
+        return Err(FitError::KAboveRead {
+            model: model.card.name.clone(),
+            k,
+            read,
+            n: points.len(),
+        });
+    }
     let t1 = Instant::now();
-    let clustering = cluster(model, &embedding, params)?;
+    let mut clustering = cluster(model, &embedding, params)?;
     let t2 = Instant::now();
     let (labels, structures, k) = match &refine_params {
         Some(r) => {
-            let refined = refine(model, points, &clustering, r);
+            let mut refined = refine(model, points, &clustering, r);
+            // A K the caller gave counts structures, not the outliers. A network trained with
+            // the outliers as one more group (AdelaideRMF's convention, and LCE's with outliers)
+            // gathers them into a learned group of their own, which refinement dissolves into
+            // -1 labels: clustered into k groups, two structures share one. So the k + 1
+            // clustering is refined too, and its answer is kept when it has no more than k
+            // structures and no fewer than the k clustering's. Curves and correspondences only:
+            // motion subspaces are not trained with outliers and drop a structure that shrinks.
+            if let Selection::Fixed(k) = params.selection()
+                && r.outliers
+                && k < read
+                && model.card.family() != geometry::Family::Subspace
+            {
+                let wider = cluster(model, &embedding, &params.with_fixed_k(k + 1)?)?;
+                let again = refine(model, points, &wider, r);
+                let found = again.structures.len();
+                if found <= k && found >= refined.structures.len() {
+                    (clustering, refined) = (wider, again);
+                }
+            }
             let k = refined.structures.len();
             (refined.labels, refined.structures, k)
         }
@@ -411,9 +451,12 @@ pub fn fit(
         ),
     };
     let t3 = Instant::now();
+    let flags_outliers = refine_params.is_some_and(|r| r.outliers);
     let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
     Ok(FitOutcome {
-        warnings: model.card.warnings(&observed(points, image, &labels, k)),
+        warnings: model
+            .card
+            .warnings(&observed(points, image, &labels, k, flags_outliers)),
         clustering,
         labels,
         structures,
@@ -848,8 +891,15 @@ fn motions(points: &PointSet, outcome: &FitOutcome) -> Vec<Motion> {
 }
 
 /// What a fit saw, for the card's validated range: the input's size, frames and image, and the
-/// answer's structure sizes and outlier share.
-fn observed(points: &PointSet, image: Option<ImageSize>, labels: &[i64], k: usize) -> Observed {
+/// answer's structure sizes and outlier share (only when the fit may answer outliers: a fit
+/// that cannot flag them says nothing of their share).
+fn observed(
+    points: &PointSet,
+    image: Option<ImageSize>,
+    labels: &[i64],
+    k: usize,
+    flags_outliers: bool,
+) -> Observed {
     let mut sizes = vec![0usize; k];
     for &l in labels {
         if let Some(s) = usize::try_from(l).ok().and_then(|l| sizes.get_mut(l)) {
@@ -866,7 +916,7 @@ fn observed(points: &PointSet, image: Option<ImageSize>, labels: &[i64], k: usiz
             .map(|(&a, &b)| [a, b]),
         frames: (points.kind() == Kind::Trajectories).then(|| points.dim() / 2),
         image_side: image.map(|s| s.width.max(s.height)),
-        outlier_ratio: Some(outliers as f64 / points.len().max(1) as f64),
+        outlier_ratio: flags_outliers.then(|| outliers as f64 / points.len().max(1) as f64),
     }
 }
 
@@ -902,6 +952,31 @@ impl LoadedModel {
 pub(crate) mod tests {
     use super::*;
     use crate::registry::tests::tiny;
+
+    #[test]
+    fn the_outlier_share_is_observed_only_when_the_fit_may_flag_outliers() {
+        let values: Vec<f64> = (0..40).map(f64::from).collect();
+        let points = PointSet::from_flat(Kind::Correspondences, 4, values).unwrap();
+        let labels = [0, 0, 1, 1, 0, 1, 0, 1, 0, 1];
+        let range = crate::registry::ValidatedRange {
+            outlier_ratio: Some([0.25, 0.75]),
+            ..Default::default()
+        };
+        // A fit that cannot answer -1 (no refinement, or outliers off) says nothing of the share:
+        // no warning that it is 0.
+        let quiet = observed(&points, None, &labels, 2, false);
+        assert_eq!(quiet.outlier_ratio, None);
+        assert!(range.warnings(&quiet).is_empty());
+        // One that may, and flags none, is below the range.
+        let flagged = observed(&points, None, &labels, 2, true);
+        assert_eq!(flagged.outlier_ratio, Some(0.0));
+        assert_eq!(range.warnings(&flagged).len(), 1);
+        let half = [0, -1, 1, -1, 0, -1, 0, -1, 1, -1];
+        assert_eq!(
+            observed(&points, None, &half, 2, true).outlier_ratio,
+            Some(0.5)
+        );
+    }
 
     #[test]
     fn each_track_gets_a_window_inside_its_longest_run() {
@@ -1248,6 +1323,47 @@ pub(crate) mod tests {
         // The model's own frame count is one window, the input itself.
         let own = model.fit(&points, image, &params).unwrap();
         assert_eq!(own.embed_dim, 3);
+    }
+
+    #[test]
+    fn a_k_above_the_points_read_after_thinning_is_refused_naming_both_counts() {
+        // A card trained far sparser than this set: the set is thinned before it is read.
+        let mut model = crate::registry::tests::tiny_reading("dense", Kind::Trajectories, 4, 7, 2);
+        model.card.spacing = Some(1e3);
+        // 300 distinct tracks scattered over the image.
+        let values = (0..4 * 300u64)
+            .map(|v| (v.wrapping_mul(2_654_435_761) % 10_007) as f64 / 100.07)
+            .collect();
+        let points = PointSet::from_flat(Kind::Trajectories, 4, values).unwrap();
+        let image = Some(ImageSize::new(100.0, 100.0).unwrap());
+        let at = |k: usize| {
+            let params = ClusterParams::builder()
+                .selection(Selection::Fixed(k))
+                .build()
+                .unwrap();
+            let options = FitOptions {
+                params: &params,
+                symmetries: &[],
+                refine: None,
+            };
+            fit(&model, &points, image, &options)
+        };
+        let read = at(2).unwrap().clustering.labels.len();
+        assert_eq!(read, points.len(), "every point is answered");
+        match at(250) {
+            Err(FitError::KAboveRead {
+                k: 250,
+                read,
+                n: 300,
+                ..
+            }) => assert!((density::MIN_READ..250).contains(&read), "{read}"),
+            other => panic!("{other:?}"),
+        }
+        let message = at(250).unwrap_err().to_string();
+        assert!(
+            message.contains("thins") && message.contains("300"),
+            "{message}"
+        );
     }
 
     #[test]

@@ -366,6 +366,30 @@ fn fits_real_adelaide_pairs_with_each_model() {
 }
 
 #[test]
+fn a_k_given_counts_the_structures_and_the_outliers_are_answered_apart() {
+    // AdelaideRMF pairs with gross outliers, k = the number of planes: the network learned the
+    // outliers as a group of their own, and the answer still has k planes, outliers -1.
+    let server = Server::start(&[]);
+    for file in ["adelaidermf/elderhalla.json", "adelaidermf/neem.json"] {
+        let f = dataset(file);
+        let structures = f["num_models"].as_u64().unwrap();
+        let r = server.post_json(
+            "/v1/fit",
+            &fit_body(&f, json!({"model": "adelaide-homography", "k": structures})),
+        );
+        assert_eq!(r.status, 200, "{file}: {}", r.text());
+        let v = r.json();
+        let n = f["points"].as_array().unwrap().len();
+        assert_eq!(check_fit(&v, n) as u64, structures, "{file}");
+        assert_eq!(v["structures"].as_array().unwrap().len() as u64, structures);
+        assert!(v["outliers"].as_u64().unwrap() > 0, "{file}");
+        // Outliers (label k) against the file's outlier label, as one group each.
+        let error = error_rate(&truth(&f), &labels(&v));
+        assert!(error < 0.1, "{file}: {error}");
+    }
+}
+
+#[test]
 fn fits_a_generated_lce_sample_invariant_to_scale() {
     let server = Server::start(&[]);
     let s = LceGenerator::new(11, LceConfig::default())

@@ -72,7 +72,7 @@ error_codes! {
     InvalidClustering = "invalid_clustering", UNPROCESSABLE_ENTITY,
         "The clustering parameters are inconsistent.";
     InvalidK = "invalid_k", UNPROCESSABLE_ENTITY,
-        "k outside 1..=N (the number of points), or k_max outside 1..=--max-k-max.";
+        "k outside 1..=N (the number of points, or those the model reads of a thinned set), or k_max outside 1..=--max-k-max.";
     InvalidSelection = "invalid_selection", UNPROCESSABLE_ENTITY,
         "selection is neither sod nor silhouette.";
     UnknownKind = "unknown_kind", UNPROCESSABLE_ENTITY,
@@ -124,11 +124,31 @@ pub struct ErrorDetail<'a> {
     pub message: &'a str,
 }
 
+/// The longest message an error answers with, in bytes: a message that quotes the request (an
+/// unknown model name, a value of the wrong type) is cut there, so a huge value is not echoed.
+pub const MAX_MESSAGE: usize = 512;
+
+/// `message` cut to [`MAX_MESSAGE`] bytes (at a character boundary), saying how much was cut.
+fn clip(message: String) -> String {
+    if message.len() <= MAX_MESSAGE {
+        return message;
+    }
+    let mut end = MAX_MESSAGE - 48;
+    while !message.is_char_boundary(end) {
+        end -= 1;
+    }
+    format!(
+        "{}... ({} more bytes cut)",
+        &message[..end],
+        message.len() - end
+    )
+}
+
 impl ApiError {
     pub fn new(code: ErrorCode, message: impl Into<String>) -> Self {
         Self {
             code,
-            message: message.into(),
+            message: clip(message.into()),
             retry_after: None,
         }
     }
@@ -195,7 +215,11 @@ impl From<InputError> for ApiError {
 
 impl From<ClusterError> for ApiError {
     fn from(e: ClusterError) -> Self {
-        Self::new(ErrorCode::InvalidClustering, e.to_string())
+        let code = match e {
+            ClusterError::KOutOfRange { .. } => ErrorCode::InvalidK,
+            _ => ErrorCode::InvalidClustering,
+        };
+        Self::new(code, e.to_string())
     }
 }
 
@@ -203,6 +227,7 @@ impl From<FitError> for ApiError {
     fn from(e: FitError) -> Self {
         match e {
             FitError::Cluster(c) => c.into(),
+            e @ FitError::KAboveRead { .. } => Self::new(ErrorCode::InvalidK, e.to_string()),
             other => Self::new(ErrorCode::ModelMismatch, other.to_string()),
         }
     }

@@ -437,6 +437,29 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
         check_error(what, &send(&app, post(&body)).await, code);
         seen.insert(code);
     }
+    // A message that quotes the request is cut: a long name is not echoed back whole.
+    let huge = "x".repeat(4 * crate::api::error::MAX_MESSAGE);
+    for (what, body, code) in [
+        (
+            "huge model name",
+            json!({"kind": "points2d", "points": two, "model": huge}),
+            E::UnknownModel,
+        ),
+        (
+            "huge kind",
+            json!({"kind": huge, "points": two}),
+            E::UnknownKind,
+        ),
+    ] {
+        let got = send(&app, post(&body)).await;
+        check_error(what, &got, code);
+        let message = got.2["error"]["message"].as_str().unwrap();
+        assert!(
+            message.len() <= crate::api::error::MAX_MESSAGE && message.ends_with("bytes cut)"),
+            "{what}: {} bytes",
+            message.len()
+        );
+    }
     let batch = json!({"requests": vec![good(); LIMITS.max_batch + 1]});
     let got = send(&app, post_to("/v1/fit/batch", &batch)).await;
     check_error("batch over --max-batch", &got, E::TooManyRequestsInBatch);

@@ -117,6 +117,16 @@ impl ClusterParams {
     pub fn seed(&self) -> u64 {
         self.seed
     }
+    /// The same parameters with K fixed at `k` (>= 1; every other field was validated).
+    pub fn with_fixed_k(&self, k: usize) -> Result<Self, ClusterError> {
+        if k == 0 {
+            return Err(ClusterError::KOutOfRange { k: 0, n: 0 });
+        }
+        Ok(Self {
+            selection: Selection::Fixed(k),
+            ..self.clone()
+        })
+    }
 }
 
 impl ClusterParamsBuilder {
