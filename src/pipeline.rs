@@ -427,8 +427,11 @@ pub fn fit(
             // gathers them into a learned group of their own, which refinement dissolves into
             // -1 labels: clustered into k groups, two structures share one. So the k + 1
             // clustering is refined too, and its answer is kept when it has no more than k
-            // structures and no fewer than the k clustering's. Curves and correspondences only:
-            // motion subspaces are not trained with outliers and drop a structure that shrinks.
+            // structures and no fewer than the k clustering's. (Refining it only where the k
+            // answer shows outliers saves the time on clean sets but misses pairs whose outliers
+            // the k answer absorbed: 6.99 against 4.20 % on the AdelaideRMF homography pairs.)
+            // Curves and correspondences only: motion subspaces are not trained with outliers
+            // and drop a structure that shrinks.
             if let Selection::Fixed(k) = params.selection()
                 && r.outliers
                 && k < read
