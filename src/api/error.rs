@@ -274,6 +274,13 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         if let Err(syntax) = serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
             return ApiError::new(ErrorCode::MalformedJson, syntax.to_string());
         }
+        // Every body the API takes is an object: say so rather than name a field of it.
+        if bytes.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {
+            return ApiError::new(
+                ErrorCode::InvalidRequest,
+                "the body must be a JSON object, such as {\"kind\": \"points2d\", \"points\": [[x, y], ...]}",
+            );
+        }
         ApiError::new(ErrorCode::InvalidRequest, message)
     })
 }

@@ -437,6 +437,24 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
         check_error(what, &send(&app, post(&body)).await, code);
         seen.insert(code);
     }
+    // Shape errors say what was expected.
+    for (what, body, expected) in [
+        (
+            "image_size of three numbers",
+            json!({"kind": "points2d", "points": two, "image_size": [1, 2, 3]}),
+            "image_size must be [width, height] in pixels, got 3 numbers",
+        ),
+        (
+            "an array for a body",
+            json!([1, 2, 3]),
+            "the body must be a JSON object",
+        ),
+    ] {
+        let got = send(&app, post(&body)).await;
+        check_error(what, &got, E::InvalidRequest);
+        let message = got.2["error"]["message"].as_str().unwrap();
+        assert!(message.starts_with(expected), "{what}: {message}");
+    }
     // A message that quotes the request is cut: a long name is not echoed back whole.
     let huge = "x".repeat(4 * crate::api::error::MAX_MESSAGE);
     for (what, body, code) in [

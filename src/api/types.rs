@@ -33,8 +33,9 @@ pub struct FitRequest {
     pub trajectory_matrix: Option<Vec<Vec<f64>>>,
     #[serde(default)]
     pub model: Option<String>,
+    /// `[width, height]`; its length is checked with the other fields, with a clear message.
     #[serde(default)]
-    pub image_size: Option<[f64; 2]>,
+    pub image_size: Option<Vec<f64>>,
     #[serde(default)]
     pub k: Option<usize>,
     #[serde(default)]
@@ -179,8 +180,17 @@ impl FitRequest {
                 ),
             ));
         }
-        let image_size = match self.image_size {
-            Some([w, h]) => Some(ImageSize::new(w, h)?),
+        let image_size = match self.image_size.as_deref() {
+            Some(&[w, h]) => Some(ImageSize::new(w, h)?),
+            Some(other) => {
+                return Err(ApiError::new(
+                    ErrorCode::InvalidRequest,
+                    format!(
+                        "image_size must be [width, height] in pixels, got {} numbers",
+                        other.len()
+                    ),
+                ));
+            }
             None => None,
         };
         let n = points.len();
