@@ -1,16 +1,18 @@
-"""AdelaideRMF pairs fitted with k = the number of structures (outliers not counted), refined:
-per pair the true k, the answer's k and the error in % (outliers, -1, scored as the file's
-outlier group), then how often k was kept and the mean error. Needs a running server.
+"""Fits given k = the number of structures (outliers not counted), refined: how often the answer
+kept k and the mean error in % (outliers, -1, scored as the data's outlier group). Needs a
+running server.
 
-  python3 research/k-given.py PORT MODEL [PAIR]
+  python3 research/k-given.py PORT MODEL [PAIR]   AdelaideRMF pairs of MODEL's type
+                                                  (adelaide-homography or adelaide-fundamental),
+                                                  one line per pair; PAIR fits that pair alone
+  python3 research/k-given.py PORT DIR            LCE sets written by gen-lce, e.g.
+      multifit-train gen-lce --out runs/data/kc-out --count 100 --seed 7101 --scale 2 --outliers 0.2
 
-MODEL is adelaide-homography or adelaide-fundamental (its pairs are those of its type); PAIR
-fits that pair alone. research/k-given-loo.sh runs it on each fold model of a cv run."""
-import collections, glob, itertools, json, sys, urllib.request
+research/k-given-loo.sh runs it on each fold model of a cv run."""
+import collections, glob, itertools, json, os, sys, urllib.request
 
-port, model = sys.argv[1], sys.argv[2]
+port, what = sys.argv[1], sys.argv[2]
 only = sys.argv[3] if len(sys.argv) > 3 else None
-kind = "homography" if "homography" in model else "fundamental"
 
 
 def post(body):
@@ -28,17 +30,29 @@ def error(truth, labels):
     return 1 - best / len(truth)
 
 
+def requests():
+    """(name, file, request body) of every set to fit."""
+    if os.path.isdir(what):
+        for path in sorted(glob.glob(f"{what}/*.json")):
+            s = json.load(open(path))
+            yield s["name"], s, {"kind": "points2d", "points": s["points"]}
+        return
+    kind = "homography" if "homography" in what else "fundamental"
+    for path in sorted(glob.glob("../shared/datasets/adelaidermf/*.json")):
+        d = json.load(open(path))
+        if d.get("model_type") == kind and (not only or d["name"] == only):
+            yield d["name"], d, {"kind": "correspondences", "model": what, "points": d["points"],
+                                 "image_size": d["image_size"]}
+
+
 rows = []
-for path in sorted(glob.glob("../shared/datasets/adelaidermf/*.json")):
-    d = json.load(open(path))
-    if d.get("model_type") != kind or (only and d["name"] != only):
-        continue
-    k = len(set(d["labels"]) - {0})
-    r = post({"kind": "correspondences", "model": model, "points": d["points"],
-              "image_size": d["image_size"], "k": k, "refine": True})
-    e = error(d["labels"], [max(l, -1) for l in r["labels"]])
+for name, data, body in requests():
+    k = len(set(data["labels"]) - {0})
+    r = post({**body, "k": k, "refine": True})
+    e = error(data["labels"], [max(l, -1) for l in r["labels"]])
     rows.append((r["k"] == k, e))
-    print(d["name"], k, r["k"], round(100 * e, 2))
+    if not os.path.isdir(what):
+        print(name, k, r["k"], round(100 * e, 2))
 if not only:
     print("k kept", sum(kept for kept, _ in rows), "/", len(rows),
           "mean error", round(100 * sum(e for _, e in rows) / len(rows), 2))
