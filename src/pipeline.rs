@@ -447,11 +447,26 @@ pub fn fit(
             let k = refined.structures.len();
             (refined.labels, refined.structures, k)
         }
-        None => (
-            clustering.labels.iter().map(|&l| l as i64).collect(),
-            Vec::new(),
-            clustering.k,
-        ),
+        None => {
+            let apart = match params.selection() {
+                Selection::Fixed(k) if k < read => {
+                    outlier_group_apart(model, points, &embedding, params, k)?
+                }
+                _ => None,
+            };
+            match apart {
+                Some((wider, labels)) => {
+                    let k = wider.k - 1;
+                    clustering = wider;
+                    (labels, Vec::new(), k)
+                }
+                None => (
+                    clustering.labels.iter().map(|&l| l as i64).collect(),
+                    Vec::new(),
+                    clustering.k,
+                ),
+            }
+        }
     };
     let t3 = Instant::now();
     let flags_outliers = refine_params.is_some_and(|r| r.outliers);
@@ -891,6 +906,41 @@ fn motions(points: &PointSet, outcome: &FitOutcome) -> Vec<Motion> {
             Motion::fitted(l, &rows)
         })
         .collect()
+}
+
+/// A fit given `k` without refinement, on a model whose network learned the outliers as a group
+/// of their own (its card answers outliers; curves and correspondences): the k + 1 clustering,
+/// when exactly one of its groups follows no model of the family ([`refine::outlier_groups`]),
+/// with that group's points labelled -1 and the others numbered 0..k. `None` otherwise, and the
+/// k clustering stands. Clustered into k groups, the outliers would take one and two
+/// structures share another.
+fn outlier_group_apart(
+    model: &LoadedModel,
+    points: &PointSet,
+    embedding: &Embedding,
+    params: &ClusterParams,
+    k: usize,
+) -> Result<Option<(Clustering, Vec<i64>)>, FitError> {
+    let family = model.card.family();
+    if !model.card.outliers || family == geometry::Family::Subspace {
+        return Ok(None);
+    }
+    let wider = cluster(model, embedding, &params.with_fixed_k(k + 1)?)?;
+    let no_model = refine::outlier_groups(points, &wider.labels, k + 1, family, model.pool());
+    let mut flagged = no_model.iter().enumerate().filter(|&(_, &o)| o);
+    let (Some((out, _)), None) = (flagged.next(), flagged.next()) else {
+        return Ok(None);
+    };
+    let labels = wider
+        .labels
+        .iter()
+        .map(|&l| match l.cmp(&out) {
+            std::cmp::Ordering::Less => l as i64,
+            std::cmp::Ordering::Equal => -1,
+            std::cmp::Ordering::Greater => l as i64 - 1,
+        })
+        .collect();
+    Ok(Some((wider, labels)))
 }
 
 /// What a fit saw, for the card's validated range: the input's size, frames and image, and the

@@ -151,6 +151,62 @@ struct Group {
     frozen: bool,
 }
 
+impl Group {
+    /// A learned group that follows no model: its robust fit explains less than
+    /// [`OUTLIER_GROUP_INLIERS`] of its points, or its noise level exceeds
+    /// [`OUTLIER_GROUP_SIGMAS`] × the fit's `sigma` (degenerate groups never do).
+    fn follows_no_model(&self, sigma: f64) -> bool {
+        let inliers = self.fit.inliers.iter().filter(|&&v| v).count();
+        let explained = inliers as f64 >= OUTLIER_GROUP_INLIERS * self.start as f64
+            && self.fit.sigma <= OUTLIER_GROUP_SIGMAS * sigma;
+        !self.frozen && !explained
+    }
+}
+
+/// Each learned group of `labels` (in 0..k) fitted by `family`'s model on its points, side by
+/// side on `threads`, and the fit's noise level σ ([`noise_level`]).
+fn learned_groups(
+    points: &PointSet,
+    labels: &[usize],
+    k: usize,
+    family: Family,
+    threads: &Threads,
+) -> (Vec<Option<Group>>, f64) {
+    let groups: Vec<Option<Group>> = threads.map_n(k, |j| {
+        let idx: Vec<usize> = (0..points.len()).filter(|&i| labels[i] == j).collect();
+        let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
+        let fit = geometry::fit(family, &rows);
+        let frozen = matches!(fit.model, Model::Degenerate { .. });
+        Some(Group {
+            fit,
+            start: idx.len(),
+            fitted_on: idx,
+            type_chosen: true,
+            frozen,
+        })
+    });
+    let sigma = noise_level(&groups);
+    (groups, sigma)
+}
+
+/// Which learned groups of `labels` (in 0..k) follow no model of `family`: the outlier group a
+/// network trained with the outliers as one more group forms, which refinement dissolves.
+pub fn outlier_groups(
+    points: &PointSet,
+    labels: &[usize],
+    k: usize,
+    family: Family,
+    threads: &Threads,
+) -> Vec<bool> {
+    threads.install(|| {
+        let (groups, sigma) = learned_groups(points, labels, k, family, threads);
+        groups
+            .iter()
+            .map(|g| g.as_ref().is_some_and(|g| g.follows_no_model(sigma)))
+            .collect()
+    })
+}
+
 /// Refines a clustering of `points` (`labels` in 0..k, one per row) into structures of
 /// `family`. `k_chosen`: `Some(k_max)` when K was chosen automatically among 1..=k_max, so
 /// structures that are one may merge and structures may be added up to k_max in all; `None`
@@ -192,28 +248,11 @@ pub fn refine_on(
             geometry::fit(family, &rows)
         };
         let mut current: Vec<i64> = labels.iter().map(|&l| l as i64).collect();
-        let mut groups: Vec<Option<Group>> = threads.map_n(k, |j| {
-            let idx = members(&current, j);
-            let fit = fit_on(&idx);
-            let frozen = matches!(fit.model, Model::Degenerate { .. });
-            Some(Group {
-                fit,
-                start: idx.len(),
-                fitted_on: idx,
-                type_chosen: true,
-                frozen,
-            })
-        });
-        let sigma = noise_level(&groups);
+        let (mut groups, sigma) = learned_groups(points, labels, k, family, threads);
         // Outlier groups are dissolved, when outliers may be answered.
         if params.outliers {
             for g in groups.iter_mut() {
-                let explained = |g: &Group| {
-                    let inliers = g.fit.inliers.iter().filter(|&&v| v).count();
-                    inliers as f64 >= OUTLIER_GROUP_INLIERS * g.start as f64
-                        && g.fit.sigma <= OUTLIER_GROUP_SIGMAS * sigma
-                };
-                if g.as_ref().is_some_and(|g| !g.frozen && !explained(g)) {
+                if g.as_ref().is_some_and(|g| g.follows_no_model(sigma)) {
                     *g = None;
                 }
             }
@@ -709,6 +748,29 @@ mod tests {
         assert_eq!(&r.labels[80..], &[-1, -1]);
         let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
         assert_eq!(&r.labels[..80], &want[..]);
+    }
+
+    #[test]
+    fn a_learned_group_scattered_over_the_plane_is_the_outlier_group() {
+        let (circles, labels) = two_circles(40, 0.02);
+        let mut values: Vec<f64> = (0..circles.len())
+            .flat_map(|i| circles.row(i).to_vec())
+            .collect();
+        let mut labels = labels;
+        // 30 points scattered over the box the circles span, as a third learned group.
+        for i in 0..30u64 {
+            let u = (i.wrapping_mul(2_654_435_761) % 1000) as f64 / 1000.0;
+            let v = (i.wrapping_mul(40_503) % 997) as f64 / 997.0;
+            values.extend([-1.0 + 13.0 * u, -2.0 + 4.0 * v]);
+            labels.push(2);
+        }
+        let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
+        let threads = Threads::default();
+        let flagged = outlier_groups(&points, &labels, 3, Family::Curves, &threads);
+        assert_eq!(flagged, vec![false, false, true]);
+        // The two circles alone: no group is flagged.
+        let clean = outlier_groups(&circles, &labels[..80], 2, Family::Curves, &threads);
+        assert_eq!(clean, vec![false, false]);
     }
 
     #[test]

@@ -390,6 +390,33 @@ fn a_k_given_counts_the_structures_and_the_outliers_are_answered_apart() {
 }
 
 #[test]
+fn without_refinement_a_k_given_still_counts_structures_and_answers_the_outlier_group_apart() {
+    // adelaide-fundamental, the default for correspondences, does not refine: its network's
+    // outlier group is answered -1 and the k motions are the other groups.
+    let server = Server::start(&[]);
+    for file in [
+        "adelaidermf/breadcubechips.json",
+        "adelaidermf/cubebreadtoychips.json",
+    ] {
+        let f = dataset(file);
+        let structures = f["num_models"].as_u64().unwrap();
+        let r = server.post_json("/v1/fit", &fit_body(&f, json!({"k": structures})));
+        assert_eq!(r.status, 200, "{file}: {}", r.text());
+        let v = r.json();
+        assert_eq!(v["model"]["name"], "adelaide-fundamental");
+        let n = f["points"].as_array().unwrap().len();
+        assert_eq!(check_fit(&v, n) as u64, structures, "{file}");
+        assert!(
+            v["structures"].as_array().unwrap().is_empty(),
+            "not refined"
+        );
+        assert!(v["outliers"].as_u64().unwrap() > 0, "{file}");
+        let error = error_rate(&truth(&f), &labels(&v));
+        assert!(error < 0.05, "{file}: {error}");
+    }
+}
+
+#[test]
 fn fits_a_generated_lce_sample_invariant_to_scale() {
     let server = Server::start(&[]);
     let s = LceGenerator::new(11, LceConfig::default())
