@@ -79,10 +79,12 @@ pub struct FitOptions<'a> {
 /// The answer to one fit.
 #[derive(Debug, Clone)]
 pub struct FitOutcome {
-    /// The learned clustering (stage 4): its labels, K and residual curve.
+    /// The learned clustering (stage 4): its labels, K and residual curve. With a K given on a
+    /// model whose network learned the outliers as a group, the k + 1 clustering when its answer
+    /// was kept; the residual curve then holds both Ks.
     pub clustering: Clustering,
     /// The answer's labels: the refined ones (−1 for outliers) with refinement, else the
-    /// clustering's.
+    /// clustering's (its outlier group −1 when [`fit`] answered it apart).
     pub labels: Vec<i64>,
     /// The answer's structures: one per label 0..k with refinement, none without.
     pub structures: Vec<Structure>,
@@ -441,7 +443,8 @@ pub fn fit(
                 let again = refine(model, points, &wider, r);
                 let found = again.structures.len();
                 if found <= k && found >= refined.structures.len() {
-                    (clustering, refined) = (wider, again);
+                    clustering = both_ks(&clustering, wider);
+                    refined = again;
                 }
             }
             let k = refined.structures.len();
@@ -457,7 +460,7 @@ pub fn fit(
             match apart {
                 Some((wider, labels)) => {
                     let k = wider.k - 1;
-                    clustering = wider;
+                    clustering = both_ks(&clustering, wider);
                     (labels, Vec::new(), k)
                 }
                 None => (
@@ -469,7 +472,16 @@ pub fn fit(
         }
     };
     let t3 = Instant::now();
-    let flags_outliers = refine_params.is_some_and(|r| r.outliers);
+    // Whether this fit may answer -1: refinement with outliers, or a K given to a model whose
+    // outlier group is answered apart.
+    let flags_outliers = match refine_params {
+        Some(r) => r.outliers,
+        None => {
+            matches!(params.selection(), Selection::Fixed(_))
+                && model.card.outliers
+                && model.card.family() != geometry::Family::Subspace
+        }
+    };
     let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
     Ok(FitOutcome {
         warnings: model
@@ -931,16 +943,31 @@ fn outlier_group_apart(
     let (Some((out, _)), None) = (flagged.next(), flagged.next()) else {
         return Ok(None);
     };
-    let labels = wider
-        .labels
+    let labels = without_group(&wider.labels, out);
+    Ok(Some((wider, labels)))
+}
+
+/// `labels` with group `out` answered -1 and the groups after it numbered one lower.
+fn without_group(labels: &[usize], out: usize) -> Vec<i64> {
+    labels
         .iter()
         .map(|&l| match l.cmp(&out) {
             std::cmp::Ordering::Less => l as i64,
             std::cmp::Ordering::Equal => -1,
             std::cmp::Ordering::Greater => l as i64 - 1,
         })
-        .collect();
-    Ok(Some((wider, labels)))
+        .collect()
+}
+
+/// `wider` (the k + 1 clustering) with the residual curve of both clusterings, so the answer
+/// shows every K clustered.
+fn both_ks(first: &Clustering, mut wider: Clustering) -> Clustering {
+    let mut residuals = first.residuals.clone();
+    residuals.extend(wider.residuals.iter().copied());
+    residuals.sort_by_key(|r| r.0);
+    residuals.dedup_by_key(|r| r.0);
+    wider.residuals = residuals;
+    wider
 }
 
 /// What a fit saw, for the card's validated range: the input's size, frames and image, and the
@@ -974,7 +1001,8 @@ fn observed(
 }
 
 impl LoadedModel {
-    /// [`fit`] with the card's test-time symmetries, without refinement.
+    /// [`fit`] with the card's test-time symmetries, without refinement (a K given still counts
+    /// structures: the outlier group may be answered −1).
     pub fn fit(
         &self,
         points: &PointSet,
@@ -1005,6 +1033,16 @@ impl LoadedModel {
 pub(crate) mod tests {
     use super::*;
     use crate::registry::tests::tiny;
+
+    #[test]
+    fn the_outlier_group_is_answered_minus_one_and_the_later_groups_move_down() {
+        assert_eq!(
+            without_group(&[0, 1, 2, 3, 1, 0], 1),
+            vec![0, -1, 1, 2, -1, 0]
+        );
+        assert_eq!(without_group(&[2, 0, 1], 2), vec![-1, 0, 1]);
+        assert_eq!(without_group(&[0, 1], 0), vec![-1, 0]);
+    }
 
     #[test]
     fn the_outlier_share_is_observed_only_when_the_fit_may_flag_outliers() {

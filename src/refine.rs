@@ -190,7 +190,8 @@ fn learned_groups(
 }
 
 /// Which learned groups of `labels` (in 0..k) follow no model of `family`: the outlier group a
-/// network trained with the outliers as one more group forms, which refinement dissolves.
+/// network trained with the outliers as one more group forms, which refinement dissolves. None
+/// when the groups' noise level is 0.
 pub fn outlier_groups(
     points: &PointSet,
     labels: &[usize],
@@ -200,9 +201,13 @@ pub fn outlier_groups(
 ) -> Vec<bool> {
     threads.install(|| {
         let (groups, sigma) = learned_groups(points, labels, k, family, threads);
+        // Noise-free groups (σ = 0) give no scale to judge a group's spread by.
         groups
             .iter()
-            .map(|g| g.as_ref().is_some_and(|g| g.follows_no_model(sigma)))
+            .map(|g| {
+                g.as_ref()
+                    .is_some_and(|g| sigma > 0.0 && g.follows_no_model(sigma))
+            })
             .collect()
     })
 }

@@ -372,8 +372,8 @@ pub struct StructureOut {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct FitResponse {
     pub model: ModelRef,
-    /// One per point: its structure, or -1 for an outlier (with refinement) or a track seen in
-    /// too few frames to place (with `visible`).
+    /// One per point: its structure, or -1 for an outlier (with refinement, or the outlier group
+    /// of a fit given k) or a track seen in too few frames to place (with `visible`).
     pub labels: Vec<i64>,
     /// Structures, not counting outliers.
     pub k: usize,
