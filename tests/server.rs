@@ -405,13 +405,11 @@ fn a_k_given_counts_the_structures_and_the_outliers_are_answered_apart() {
         let n = f["points"].as_array().unwrap().len();
         assert_eq!(check_fit(&v, n) as u64, structures, "{file}");
         // The residual curve shows every K clustered: k, and k + 1 where that answer was kept.
-        let ks: Vec<u64> = v["residuals"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|r| r["k"].as_u64().unwrap())
-            .collect();
-        assert!(ks.contains(&structures), "{file}: {ks:?}");
+        let curve = v["residuals"].as_array().unwrap();
+        assert!(
+            curve.iter().any(|r| r["k"] == structures),
+            "{file}: {curve:?}"
+        );
         let answered = v["structures"].as_array().unwrap().len() as u64;
         assert_eq!(answered, if refined { structures } else { 0 }, "{file}");
         assert!(v["outliers"].as_u64().unwrap() > 0, "{file}");
