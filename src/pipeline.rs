@@ -74,6 +74,9 @@ pub struct FitOptions<'a> {
     pub symmetries: &'a [Symmetry],
     /// Geometric refinement, or `None` for the learned clustering alone.
     pub refine: Option<RefineParams>,
+    /// Without refinement, whether a fit given k may answer the network's outlier group −1
+    /// (curves and correspondences; the request's `outliers`, by default the card's).
+    pub outlier_group: bool,
 }
 
 /// The answer to one fit.
@@ -399,6 +402,7 @@ pub fn fit(
         params,
         symmetries,
         refine: refine_params,
+        outlier_group,
     } = *options;
     if let Selection::Fixed(k) = params.selection()
         && k > points.len()
@@ -452,7 +456,7 @@ pub fn fit(
         }
         None => {
             let apart = match params.selection() {
-                Selection::Fixed(k) if k < read => {
+                Selection::Fixed(k) if k < read && outlier_group => {
                     outlier_group_apart(model, points, &embedding, params, k)?
                 }
                 _ => None,
@@ -478,7 +482,7 @@ pub fn fit(
         Some(r) => r.outliers,
         None => {
             matches!(params.selection(), Selection::Fixed(_))
-                && model.card.outliers
+                && outlier_group
                 && model.card.family() != geometry::Family::Subspace
         }
     };
@@ -921,7 +925,7 @@ fn motions(points: &PointSet, outcome: &FitOutcome) -> Vec<Motion> {
 }
 
 /// A fit given `k` without refinement, on a model whose network learned the outliers as a group
-/// of their own (its card answers outliers; curves and correspondences): the k + 1 clustering,
+/// of their own (curves and correspondences): the k + 1 clustering,
 /// when exactly one of its groups follows no model of the family ([`refine::outlier_groups`]),
 /// with that group's points labelled -1 and the others numbered 0..k. `None` otherwise, and the
 /// k clustering stands. Clustered into k groups, the outliers would take one and two
@@ -934,7 +938,7 @@ fn outlier_group_apart(
     k: usize,
 ) -> Result<Option<(Clustering, Vec<i64>)>, FitError> {
     let family = model.card.family();
-    if !model.card.outliers || family == geometry::Family::Subspace {
+    if family == geometry::Family::Subspace {
         return Ok(None);
     }
     let wider = cluster(model, embedding, &params.with_fixed_k(k + 1)?)?;
@@ -1001,8 +1005,8 @@ fn observed(
 }
 
 impl LoadedModel {
-    /// [`fit`] with the card's test-time symmetries, without refinement (a K given still counts
-    /// structures: the outlier group may be answered −1).
+    /// [`fit`] with the card's test-time symmetries, without refinement: the learned clustering
+    /// (a K given is the number of groups, no outlier group set apart).
     pub fn fit(
         &self,
         points: &PointSet,
@@ -1012,7 +1016,7 @@ impl LoadedModel {
         self.fit_with(points, image, params, &self.card.test_symmetries)
     }
 
-    /// [`fit`] with the given test-time symmetries instead of the card's, without refinement.
+    /// [`fit`] with the given test-time symmetries instead of the card's, as [`LoadedModel::fit`].
     pub fn fit_with(
         &self,
         points: &PointSet,
@@ -1024,6 +1028,7 @@ impl LoadedModel {
             params,
             symmetries,
             refine: None,
+            outlier_group: false,
         };
         fit(self, points, image, &options)
     }
@@ -1311,6 +1316,7 @@ pub(crate) mod tests {
                 outliers: false,
                 ..RefineParams::default()
             }),
+            outlier_group: false,
         };
         let image = Some(ImageSize::new(64.0, 64.0).unwrap());
         let out = fit_seen(&model, &points, &visibility, image, &options).unwrap();
@@ -1436,6 +1442,7 @@ pub(crate) mod tests {
                 params: &params,
                 symmetries: &[],
                 refine: None,
+                outlier_group: false,
             };
             fit(&model, &points, image, &options)
         };
@@ -1465,6 +1472,7 @@ pub(crate) mod tests {
             params: &params,
             symmetries: &[],
             refine: Some(RefineParams::default()),
+            outlier_group: false,
         };
         let fit = fit(&model, &points, image, &options).unwrap();
         assert_eq!(fit.labels.len(), points.len());

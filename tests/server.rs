@@ -396,6 +396,15 @@ fn a_k_given_counts_the_structures_and_the_outliers_are_answered_apart() {
     ] {
         let f = dataset(file);
         let structures = f["num_models"].as_u64().unwrap();
+        // "outliers": false without refinement: plain k groups, none answered -1.
+        if !refined {
+            let plain = json!({"model": model, "k": structures, "outliers": false});
+            let r = server.post_json("/v1/fit", &fit_body(&f, plain));
+            assert_eq!(r.status, 200, "{file}: {}", r.text());
+            let v = r.json();
+            assert_eq!(v["k"].as_u64(), Some(structures), "{file}");
+            assert_eq!(v["outliers"].as_u64(), Some(0), "{file}");
+        }
         let r = server.post_json(
             "/v1/fit",
             &fit_body(&f, json!({"model": model, "k": structures})),

@@ -282,6 +282,7 @@ async fn run_fit(state: &AppState, job: FitJob) -> Result<FitResponse, ApiError>
                 params: &job.params,
                 symmetries,
                 refine: job.refine,
+                outlier_group: job.outlier_group,
             };
             let outcome = match &job.visibility {
                 Some(seen) => {

@@ -84,6 +84,8 @@ pub struct FitJob {
     pub test_symmetries: bool,
     /// Geometric refinement, or `None` for the learned clustering alone.
     pub refine: Option<RefineParams>,
+    /// Without refinement, whether a k given may answer the network's outlier group -1.
+    pub outlier_group: bool,
     /// Which frames each track was seen in, when the request said (trajectories).
     pub visibility: Option<Visibility>,
 }
@@ -226,11 +228,11 @@ impl FitRequest {
             self.outliers,
             self.outlier_threshold,
         ) {
-            (false, None, None) => None,
+            (false, None | Some(false), None) => None,
             (false, _, _) => {
                 return Err(ApiError::new(
                     ErrorCode::InvalidRequest,
-                    "outliers and outlier_threshold need refine",
+                    "outliers: true and outlier_threshold need refine",
                 ));
             }
             (true, outliers, threshold) => {
@@ -300,6 +302,7 @@ impl FitRequest {
             params,
             return_embeddings,
             test_symmetries: self.test_symmetries.unwrap_or(true),
+            outlier_group: self.outliers.unwrap_or(model.card.outliers),
             refine,
             visibility,
         })

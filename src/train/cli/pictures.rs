@@ -81,6 +81,7 @@ pub fn write(
             params: &params,
             symmetries: &model.card.test_symmetries,
             refine: s.refine,
+            outlier_group: model.card.outliers,
         };
         let fit = pipeline::fit(model, &sample.points, sample.image_size, &options).map_err(
             |source| CliError::Sample {
