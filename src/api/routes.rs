@@ -371,6 +371,12 @@ async fn fit_batch(
     let mut failed = EntryErrors::default();
     for raw in batch.requests {
         let one = async {
+            if !raw.is_object() {
+                return Err(ApiError::new(
+                    ErrorCode::InvalidRequest,
+                    "each batch entry must be a JSON object, a fit request",
+                ));
+            }
             let request: FitRequest = serde_json::from_value(raw)
                 .map_err(|e| ApiError::new(ErrorCode::InvalidRequest, e.to_string()))?;
             let job = request.validate(models, &state.limits)?;

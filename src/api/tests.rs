@@ -478,6 +478,19 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
             message.len()
         );
     }
+    // A batch entry that is not an object says so.
+    let batch = json!({"requests": [good(), 5]});
+    let got = send(&app, post_to("/v1/fit/batch", &batch)).await;
+    assert_eq!(got.0, StatusCode::OK, "{}", got.2);
+    let entry = &got.2["results"][1]["error"];
+    assert_eq!(entry["code"], "invalid_request");
+    assert!(
+        entry["message"]
+            .as_str()
+            .unwrap()
+            .contains("must be a JSON object"),
+        "{entry}"
+    );
     let batch = json!({"requests": vec![good(); LIMITS.max_batch + 1]});
     let got = send(&app, post_to("/v1/fit/batch", &batch)).await;
     check_error("batch over --max-batch", &got, E::TooManyRequestsInBatch);
