@@ -422,27 +422,27 @@ pub fn fit(
             n: points.len(),
         });
     }
+    // A K the caller gave counts structures, not the outliers. The curve and correspondence
+    // networks learned the outliers as one more group (AdelaideRMF's convention, and LCE's with
+    // outliers): clustered into k groups, they take one and two structures share another. Such
+    // a fit also reads the k + 1 clustering, below, where there is a point to spare for it.
+    let given = match params.selection() {
+        Selection::Fixed(k) if model.card.family() != geometry::Family::Subspace => Some(k),
+        _ => None,
+    };
     let t1 = Instant::now();
     let mut clustering = cluster(model, &embedding, params)?;
     let t2 = Instant::now();
     let (labels, structures, k) = match &refine_params {
         Some(r) => {
             let mut refined = refine(model, points, &clustering, r);
-            // A K the caller gave counts structures, not the outliers. A network trained with
-            // the outliers as one more group (AdelaideRMF's convention, and LCE's with outliers)
-            // gathers them into a learned group of their own, which refinement dissolves into
-            // -1 labels: clustered into k groups, two structures share one. So the k + 1
-            // clustering is refined too, and its answer is kept when it has no more than k
-            // structures and no fewer than the k clustering's. (Refining it only where the k
-            // answer shows outliers saves the time on clean sets but misses pairs whose outliers
-            // the k answer absorbed: 6.99 against 4.20 % on the AdelaideRMF homography pairs.)
-            // Curves and correspondences only: motion subspaces are not trained with outliers
-            // and drop a structure that shrinks.
-            if let Selection::Fixed(k) = params.selection()
-                && r.outliers
-                && k < read
-                && model.card.family() != geometry::Family::Subspace
-            {
+            // Refinement dissolves the outlier group into -1 labels, so the k + 1 clustering is
+            // refined too, and its answer is kept when it has no more than k structures and no
+            // fewer than the k clustering's. (Refining it only where the k answer shows outliers
+            // saves the time on clean sets but misses pairs whose outliers the k answer
+            // absorbed: 6.99 against 4.20 % on the AdelaideRMF homography pairs.) Motion
+            // subspaces are not trained with outliers and drop a structure that shrinks.
+            if let Some(k) = given.filter(|&k| r.outliers && k < read) {
                 let wider = cluster(model, &embedding, &params.with_fixed_k(k + 1)?)?;
                 let again = refine(model, points, &wider, r);
                 let found = again.structures.len();
@@ -455,11 +455,9 @@ pub fn fit(
             (refined.labels, refined.structures, k)
         }
         None => {
-            let apart = match params.selection() {
-                Selection::Fixed(k) if k < read && outlier_group => {
-                    outlier_group_apart(model, points, &embedding, params, k)?
-                }
-                _ => None,
+            let apart = match given.filter(|&k| outlier_group && k < read) {
+                Some(k) => outlier_group_apart(model, points, &embedding, params, k)?,
+                None => None,
             };
             match apart {
                 Some((wider, labels)) => {
@@ -480,11 +478,7 @@ pub fn fit(
     // outlier group is answered apart.
     let flags_outliers = match refine_params {
         Some(r) => r.outliers,
-        None => {
-            matches!(params.selection(), Selection::Fixed(_))
-                && outlier_group
-                && model.card.family() != geometry::Family::Subspace
-        }
+        None => given.is_some() && outlier_group,
     };
     let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
     Ok(FitOutcome {
@@ -925,7 +919,7 @@ fn motions(points: &PointSet, outcome: &FitOutcome) -> Vec<Motion> {
 }
 
 /// A fit given `k` without refinement, on a model whose network learned the outliers as a group
-/// of their own (curves and correspondences): the k + 1 clustering,
+/// of their own (curves and correspondences, as [`fit`] checks): the k + 1 clustering,
 /// when exactly one of its groups follows no model of the family ([`refine::outlier_groups`]),
 /// with that group's points labelled -1 and the others numbered 0..k. `None` otherwise, and the
 /// k clustering stands. Clustered into k groups, the outliers would take one and two
@@ -938,9 +932,6 @@ fn outlier_group_apart(
     k: usize,
 ) -> Result<Option<(Clustering, Vec<i64>)>, FitError> {
     let family = model.card.family();
-    if family == geometry::Family::Subspace {
-        return Ok(None);
-    }
     let wider = cluster(model, embedding, &params.with_fixed_k(k + 1)?)?;
     let no_model = refine::outlier_groups(points, &wider.labels, k + 1, family, model.pool());
     let mut flagged = no_model.iter().enumerate().filter(|&(_, &o)| o);

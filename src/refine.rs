@@ -163,6 +163,12 @@ impl Group {
     }
 }
 
+/// `family`'s model fitted on the rows `idx` of `points`, its type chosen among the family's.
+fn fit_rows(points: &PointSet, idx: &[usize], family: Family) -> geometry::Fit {
+    let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
+    geometry::fit(family, &rows)
+}
+
 /// Each learned group of `labels` (in 0..k) fitted by `family`'s model on its points, side by
 /// side on `threads`, and the fit's noise level σ ([`noise_level`]).
 fn learned_groups(
@@ -174,8 +180,7 @@ fn learned_groups(
 ) -> (Vec<Option<Group>>, f64) {
     let groups: Vec<Option<Group>> = threads.map_n(k, |j| {
         let idx: Vec<usize> = (0..points.len()).filter(|&i| labels[i] == j).collect();
-        let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
-        let fit = geometry::fit(family, &rows);
+        let fit = fit_rows(points, &idx, family);
         let frozen = matches!(fit.model, Model::Degenerate { .. });
         Some(Group {
             fit,
@@ -248,10 +253,7 @@ pub fn refine_on(
         let members = |labels: &[i64], j: usize| -> Vec<usize> {
             (0..n).filter(|&i| labels[i] == j as i64).collect()
         };
-        let fit_on = |idx: &[usize]| {
-            let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
-            geometry::fit(family, &rows)
-        };
+        let fit_on = |idx: &[usize]| fit_rows(points, idx, family);
         let mut current: Vec<i64> = labels.iter().map(|&l| l as i64).collect();
         let (mut groups, sigma) = learned_groups(points, labels, k, family, threads);
         // Outlier groups are dissolved, when outliers may be answered.

@@ -152,6 +152,15 @@ impl ApiError {
             retry_after: None,
         }
     }
+    /// `what` (the body, a batch entry) is JSON but not the object a fit request is.
+    pub fn not_an_object(what: &str) -> Self {
+        Self::new(
+            ErrorCode::InvalidRequest,
+            format!(
+                "{what} must be a JSON object, such as {{\"kind\": \"points2d\", \"points\": [[x, y], ...]}}"
+            ),
+        )
+    }
     pub fn not_found(message: impl Into<String>) -> Self {
         Self::new(ErrorCode::NotFound, message)
     }
@@ -276,10 +285,7 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         }
         // Every body the API takes is an object: say so rather than name a field of it.
         if bytes.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {
-            return ApiError::new(
-                ErrorCode::InvalidRequest,
-                "the body must be a JSON object, such as {\"kind\": \"points2d\", \"points\": [[x, y], ...]}",
-            );
+            return ApiError::not_an_object("the body");
         }
         ApiError::new(ErrorCode::InvalidRequest, message)
     })

@@ -372,10 +372,7 @@ async fn fit_batch(
     for raw in batch.requests {
         let one = async {
             if !raw.is_object() {
-                return Err(ApiError::new(
-                    ErrorCode::InvalidRequest,
-                    "each batch entry must be a JSON object, a fit request",
-                ));
+                return Err(ApiError::not_an_object("each batch entry"));
             }
             let request: FitRequest = serde_json::from_value(raw)
                 .map_err(|e| ApiError::new(ErrorCode::InvalidRequest, e.to_string()))?;
