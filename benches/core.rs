@@ -2,7 +2,8 @@
 //! the same shapes as the floor), k-means with K selection, the whole fit of a shipped model,
 //! geometric refinement, the SVG picture of a fit, and training steps.
 //! Run: `cargo bench --bench core` (add `-- quick` for fewer repetitions, and section names,
-//! e.g. `-- refine`, to run only those). Prints medians.
+//! e.g. `-- refine`, to run only those; `-- refine curves` runs one family's refinement rows:
+//! curves, homography or subspace). Prints medians.
 
 use std::time::Instant;
 
@@ -50,7 +51,12 @@ fn main() {
         .map(String::as_str)
         .filter(|a| !a.starts_with('-') && *a != "quick")
         .collect();
-    let wanted = |section: &str| named.is_empty() || named.contains(&section);
+    let families = ["curves", "homography", "subspace"];
+    let family_named = |name: &str| {
+        !named.iter().any(|a| families.contains(a)) || named.iter().any(|a| name.ends_with(a))
+    };
+    let wanted =
+        |section: &str| named.iter().all(|a| families.contains(a)) || named.contains(&section);
     let reps = if quick { 3 } else { 15 };
     let device = cpu_device();
     device.seed(0);
@@ -301,7 +307,7 @@ fn main() {
                 Family::Subspace,
             ),
         ];
-        for (name, points, labels, family) in &sets {
+        for (name, points, labels, family) in sets.iter().filter(|s| family_named(s.0)) {
             let k = labels.iter().max().map_or(0, |m| m + 1);
             // K chosen automatically (structures may merge), a caller's K, and a caller's K without
             // the hypotheses stage (what it costs). Curves keep a point within 1 σ of its
