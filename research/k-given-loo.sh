@@ -2,7 +2,7 @@
 # research/k-given.py on leave-one-out: each AdelaideRMF pair of MODEL's type fitted, with k =
 # its number of structures, by the fold model that never saw it (served with the shipped card's
 # serving settings: refinement, outliers, model family), then the mean. REFINE=0 fits
-# without refinement, as k-given.py.
+# without refinement and K=auto lets the card choose K, as in k-given.py.
 # Usage: research/k-given-loo.sh [CV_RUN] [MODEL] [SERVER_BIN]
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -8,8 +8,9 @@ running server.
   python3 research/k-given.py PORT DIR            LCE sets written by gen-lce, e.g.
       multifit-train gen-lce --out runs/data/kc-out --count 100 --seed 7101 --scale 2 --outliers 0.2
 
-REFINE=0 in the environment fits without refinement. research/k-given-loo.sh runs it on each
-fold model of a cv run."""
+REFINE=0 in the environment fits without refinement; K=auto sends no k (the card's selection
+chooses K), and "k kept" then counts answers whose k is the number of structures.
+research/k-given-loo.sh runs it on each fold model of a cv run."""
 import collections, glob, itertools, json, os, sys, urllib.request
 
 port, what = sys.argv[1], sys.argv[2]
@@ -49,7 +50,8 @@ def requests():
 rows = []
 for name, data, body in requests():
     k = len(set(data["labels"]) - {0})
-    r = post({**body, "k": k, "refine": os.environ.get("REFINE", "1") == "1"})
+    given = {} if os.environ.get("K") == "auto" else {"k": k}
+    r = post({**body, **given, "refine": os.environ.get("REFINE", "1") == "1"})
     e = error(data["labels"], [max(l, -1) for l in r["labels"]])
     rows.append((r["k"] == k, e))
     if not os.path.isdir(what):

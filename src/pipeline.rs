@@ -74,8 +74,9 @@ pub struct FitOptions<'a> {
     pub symmetries: &'a [Symmetry],
     /// Geometric refinement, or `None` for the learned clustering alone.
     pub refine: Option<RefineParams>,
-    /// Without refinement, whether a fit given k may answer the network's outlier group −1
-    /// (curves and correspondences; the request's `outliers`, by default the card's).
+    /// Without refinement, whether a fit may answer the network's outlier group −1 (curves and
+    /// correspondences; the request's `outliers`, by default the card's): the one group of the
+    /// chosen K, or of the k + 1 clustering for a k given, that follows no model.
     pub outlier_group: bool,
 }
 
@@ -454,31 +455,37 @@ pub fn fit(
             let k = refined.structures.len();
             (refined.labels, refined.structures, k)
         }
-        None => {
-            let apart = match given.filter(|&k| outlier_group && k < read) {
-                Some(k) => outlier_group_apart(model, points, &embedding, params, k)?,
-                None => None,
-            };
-            match apart {
-                Some((wider, labels)) => {
-                    let k = wider.k - 1;
-                    clustering = both_ks(&clustering, wider);
-                    (labels, Vec::new(), k)
+        None if outlier_group => match given {
+            // Given k: the k + 1 clustering, where the outliers have a group of their own.
+            Some(k) if k < read => {
+                match outlier_group_apart(model, points, &embedding, params, k)? {
+                    Some((wider, labels)) => {
+                        let k = wider.k - 1;
+                        clustering = both_ks(&clustering, wider);
+                        (labels, Vec::new(), k)
+                    }
+                    None => unchanged(&clustering),
                 }
-                None => (
-                    clustering.labels.iter().map(|&l| l as i64).collect(),
-                    Vec::new(),
-                    clustering.k,
-                ),
             }
-        }
+            Some(_) => unchanged(&clustering),
+            // K chosen: the outliers' group is among the chosen K, and is not a structure.
+            None => match the_outlier_group(model, points, &clustering) {
+                Some(out) => (
+                    without_group(&clustering.labels, out),
+                    Vec::new(),
+                    clustering.k - 1,
+                ),
+                None => unchanged(&clustering),
+            },
+        },
+        None => unchanged(&clustering),
     };
     let t3 = Instant::now();
-    // Whether this fit may answer -1: refinement with outliers, or a K given to a model whose
-    // outlier group is answered apart.
+    // Whether this fit may answer -1: refinement with outliers, or a model whose outlier group
+    // is answered apart.
     let flags_outliers = match refine_params {
         Some(r) => r.outliers,
-        None => given.is_some() && outlier_group,
+        None => outlier_group && model.card.family() != geometry::Family::Subspace,
     };
     let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
     Ok(FitOutcome {
@@ -931,15 +938,47 @@ fn outlier_group_apart(
     params: &ClusterParams,
     k: usize,
 ) -> Result<Option<(Clustering, Vec<i64>)>, FitError> {
-    let family = model.card.family();
     let wider = cluster(model, embedding, &params.with_fixed_k(k + 1)?)?;
-    let no_model = refine::outlier_groups(points, &wider.labels, k + 1, family, model.pool());
+    Ok(the_outlier_group(model, points, &wider).map(|out| {
+        let labels = without_group(&wider.labels, out);
+        (wider, labels)
+    }))
+}
+
+/// The one group of `clustering` that follows no model of the card's family
+/// ([`refine::outlier_groups`]): the outliers, where the network learned them as a group of their
+/// own. `None` when no group or more than one does, or for a single group (nothing else would
+/// be left).
+fn the_outlier_group(
+    model: &LoadedModel,
+    points: &PointSet,
+    clustering: &Clustering,
+) -> Option<usize> {
+    let family = model.card.family();
+    if clustering.k < 2 || family == geometry::Family::Subspace {
+        return None;
+    }
+    let no_model = refine::outlier_groups(
+        points,
+        &clustering.labels,
+        clustering.k,
+        family,
+        model.pool(),
+    );
     let mut flagged = no_model.iter().enumerate().filter(|&(_, &o)| o);
-    let (Some((out, _)), None) = (flagged.next(), flagged.next()) else {
-        return Ok(None);
-    };
-    let labels = without_group(&wider.labels, out);
-    Ok(Some((wider, labels)))
+    match (flagged.next(), flagged.next()) {
+        (Some((out, _)), None) => Some(out),
+        _ => None,
+    }
+}
+
+/// The clustering's labels and K as the answer, with no structures (an unrefined fit).
+fn unchanged(clustering: &Clustering) -> (Vec<i64>, Vec<Structure>, usize) {
+    (
+        clustering.labels.iter().map(|&l| l as i64).collect(),
+        Vec::new(),
+        clustering.k,
+    )
 }
 
 /// `labels` with group `out` answered -1 and the groups after it numbered one lower.

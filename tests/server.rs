@@ -429,6 +429,35 @@ fn a_k_given_counts_the_structures_and_the_outliers_are_answered_apart() {
 }
 
 #[test]
+fn a_chosen_k_counts_the_structures_and_the_outliers_are_answered_apart() {
+    // The default model for correspondences (adelaide-fundamental, unrefined) chooses K among
+    // groups one of which is the outliers its network learned as a group: that group is
+    // answered -1 and k counts the motions.
+    let server = Server::start(&[]);
+    for file in [
+        "adelaidermf/breadcubechips.json",
+        "adelaidermf/gamebiscuit.json",
+    ] {
+        let f = dataset(file);
+        let structures = f["num_models"].as_u64().unwrap();
+        let r = server.post_json("/v1/fit", &fit_body(&f, json!({})));
+        assert_eq!(r.status, 200, "{file}: {}", r.text());
+        let v = r.json();
+        assert_eq!(v["model"]["name"], "adelaide-fundamental");
+        let n = f["points"].as_array().unwrap().len();
+        assert_eq!(check_fit(&v, n) as u64, structures, "{file}");
+        assert!(v["outliers"].as_u64().unwrap() > 0, "{file}");
+        let error = error_rate(&truth(&f), &labels(&v));
+        assert!(error < 0.05, "{file}: {error}");
+        // With "outliers": false the outlier group stays one of the chosen groups.
+        let r = server.post_json("/v1/fit", &fit_body(&f, json!({"outliers": false})));
+        let v = r.json();
+        assert_eq!(v["k"].as_u64(), Some(structures + 1), "{file}");
+        assert_eq!(v["outliers"].as_u64(), Some(0), "{file}");
+    }
+}
+
+#[test]
 fn fits_a_generated_lce_sample_invariant_to_scale() {
     let server = Server::start(&[]);
     let s = LceGenerator::new(11, LceConfig::default())
