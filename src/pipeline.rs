@@ -399,6 +399,18 @@ pub fn fit(
     image: Option<ImageSize>,
     options: &FitOptions,
 ) -> Result<FitOutcome, FitError> {
+    fit_counting(model, points, image, options, "points")
+}
+
+/// [`fit`], its warnings naming the rows of `points` as `rows` ("points", or the tracks seen
+/// in every frame of a partly seen set).
+fn fit_counting(
+    model: &LoadedModel,
+    points: &PointSet,
+    image: Option<ImageSize>,
+    options: &FitOptions,
+    rows: &'static str,
+) -> Result<FitOutcome, FitError> {
     let FitOptions {
         params,
         symmetries,
@@ -488,10 +500,15 @@ pub fn fit(
         None => outlier_group && model.card.family() != geometry::Family::Subspace,
     };
     let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+    let mut warnings = model.card.warnings(&Observed {
+        rows,
+        ..observed(points, image, &labels, k, flags_outliers)
+    });
+    if let Selection::Fixed(asked) = params.selection() {
+        warnings.extend(fewer_than_asked(asked, k));
+    }
     Ok(FitOutcome {
-        warnings: model
-            .card
-            .warnings(&observed(points, image, &labels, k, flags_outliers)),
+        warnings,
         clustering,
         labels,
         structures,
@@ -538,7 +555,13 @@ pub fn fit_seen(
     let throughout = points
         .select(&complete)
         .map_err(|e| FitError::Input(e.to_string()))?;
-    let mut outcome = fit(model, &throughout, image, options)?;
+    let mut outcome = fit_counting(
+        model,
+        &throughout,
+        image,
+        options,
+        "tracks seen in every frame",
+    )?;
     let t0 = Instant::now();
     let motions = motions(&throughout, &outcome);
     let placing = Placing {
@@ -981,6 +1004,22 @@ fn unchanged(clustering: &Clustering) -> (Vec<i64>, Vec<Structure>, usize) {
     )
 }
 
+/// The warning of an answer with fewer structures than the k the caller gave (refinement
+/// dropped the difference); `None` when it has k.
+fn fewer_than_asked(asked: usize, answered: usize) -> Option<String> {
+    let dropped = asked.checked_sub(answered).filter(|&d| d > 0)?;
+    let (noun, their) = if dropped == 1 {
+        ("group", "its")
+    } else {
+        ("groups", "their")
+    };
+    Some(format!(
+        "k = {asked} was given and refinement answers {answered} structures: {dropped} learned \
+         {noun} followed no model or lost most of {their} points to the others (\"refine\": \
+         false answers the {asked} learned groups)"
+    ))
+}
+
 /// `labels` with group `out` answered -1 and the groups after it numbered one lower.
 fn without_group(labels: &[usize], out: usize) -> Vec<i64> {
     labels
@@ -1022,6 +1061,7 @@ fn observed(
     }
     let outliers = labels.iter().filter(|&&l| l < 0).count();
     Observed {
+        rows: "points",
         points: points.len(),
         points_per_structure: sizes
             .iter()
@@ -1080,28 +1120,45 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn an_answer_with_fewer_structures_than_the_k_given_says_so() {
+        assert_eq!(fewer_than_asked(3, 3), None);
+        assert_eq!(fewer_than_asked(3, 4), None);
+        let one = fewer_than_asked(3, 2).unwrap();
+        assert!(
+            one.starts_with(
+                "k = 3 was given and refinement answers 2 structures: 1 learned group followed"
+            ),
+            "{one}"
+        );
+        let two = fewer_than_asked(4, 2).unwrap();
+        assert!(two.contains("2 learned groups followed no model or lost most of their points"));
+        assert!(
+            two.ends_with("(\"refine\": false answers the 4 learned groups)"),
+            "{two}"
+        );
+    }
+
+    #[test]
     fn the_outlier_share_is_observed_only_when_the_fit_may_flag_outliers() {
         let values: Vec<f64> = (0..40).map(f64::from).collect();
         let points = PointSet::from_flat(Kind::Correspondences, 4, values).unwrap();
         let labels = [0, 0, 1, 1, 0, 1, 0, 1, 0, 1];
         let range = crate::registry::ValidatedRange {
-            outlier_ratio: Some([0.25, 0.75]),
+            outlier_ratio: Some([0.0, 0.25]),
             ..Default::default()
         };
-        // A fit that cannot answer -1 (no refinement, or outliers off) says nothing of the share:
-        // no warning that it is 0.
-        let quiet = observed(&points, None, &labels, 2, false);
+        // A fit that cannot answer -1 (no refinement, or outliers off) says nothing of the share.
+        let half = [0, -1, 1, -1, 0, -1, 0, -1, 1, -1];
+        let quiet = observed(&points, None, &half, 2, false);
         assert_eq!(quiet.outlier_ratio, None);
         assert!(range.warnings(&quiet).is_empty());
-        // One that may, and flags none, is below the range.
-        let flagged = observed(&points, None, &labels, 2, true);
-        assert_eq!(flagged.outlier_ratio, Some(0.0));
+        // One that may is measured: none flagged is within the range, half is above it.
+        let clean = observed(&points, None, &labels, 2, true);
+        assert_eq!(clean.outlier_ratio, Some(0.0));
+        assert!(range.warnings(&clean).is_empty());
+        let flagged = observed(&points, None, &half, 2, true);
+        assert_eq!(flagged.outlier_ratio, Some(0.5));
         assert_eq!(range.warnings(&flagged).len(), 1);
-        let half = [0, -1, 1, -1, 0, -1, 0, -1, 1, -1];
-        assert_eq!(
-            observed(&points, None, &half, 2, true).outlier_ratio,
-            Some(0.5)
-        );
     }
 
     #[test]
@@ -1269,8 +1326,12 @@ pub(crate) mod tests {
         // The first is half a pixel off its motion in frame 0.
         rows[12][0] += 0.5;
         rows.push(track(1.0, 1.0, 0));
-        let mut seen = vec![vec![1i64; 4]; 12];
-        seen.extend([vec![1, 1, 0, 1], vec![1, 1, 0, 1], vec![1, 0, 0, 1]]);
+        let mut seen = vec![vec![true; 4]; 12];
+        seen.extend([
+            vec![true, true, false, true],
+            vec![true, true, false, true],
+            vec![true, false, false, true],
+        ]);
         let points = PointSet::from_rows(Kind::Trajectories, &rows).unwrap();
         (points, Visibility::new(&seen, 15, 4).unwrap())
     }
@@ -1373,13 +1434,13 @@ pub(crate) mod tests {
             assert!(s.rms.is_finite());
         }
         // A mask of other tracks is refused, not a panic.
-        let other = Visibility::new(&vec![vec![1i64; 4]; 3], 3, 4).unwrap();
+        let other = Visibility::new(&vec![vec![true; 4]; 3], 3, 4).unwrap();
         assert!(matches!(
             fit_seen(&model, &points, &other, image, &options),
             Err(FitError::Input(_))
         ));
         // Every track seen throughout: the plain fit.
-        let all = Visibility::new(&vec![vec![1i64; 4]; 12], 12, 4).unwrap();
+        let all = Visibility::new(&vec![vec![true; 4]; 12], 12, 4).unwrap();
         let plain = fit_seen(&model, &throughout, &all, image, &options).unwrap();
         assert_eq!(plain.labels, alone.labels);
     }

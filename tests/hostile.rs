@@ -662,6 +662,16 @@ fn cases() -> Vec<Case> {
             json!({"selection": "SOD", "k": null}),
             "invalid_selection",
         ),
+        (
+            "k and k_max",
+            json!({"k": 2, "k_max": 3}),
+            "invalid_request",
+        ),
+        (
+            "k and selection",
+            json!({"k": 2, "selection": "sod"}),
+            "invalid_request",
+        ),
     ] {
         fit(
             &mut cases,
@@ -823,7 +833,7 @@ fn cases() -> Vec<Case> {
         (
             "visible flag 7",
             json!({"kind": "trajectories", "points": traj_rows, "visible": vec![vec![1, 1, 7, 1, 1]; 8]}),
-            "invalid_points",
+            "invalid_request",
         ),
         (
             "no track seen in every frame",

@@ -154,11 +154,13 @@ impl ApiError {
     }
     /// `what` (the body, a batch entry) is JSON but not the object a fit request is.
     pub fn not_an_object(what: &str) -> Self {
+        Self::not_an_object_like(what, FIT_EXAMPLE)
+    }
+    /// `what` is JSON but not an object; `example` shows one.
+    fn not_an_object_like(what: &str, example: &str) -> Self {
         Self::new(
             ErrorCode::InvalidRequest,
-            format!(
-                "{what} must be a JSON object, such as {{\"kind\": \"points2d\", \"points\": [[x, y], ...]}}"
-            ),
+            format!("{what} must be a JSON object, such as {example}"),
         )
     }
     pub fn not_found(message: impl Into<String>) -> Self {
@@ -265,8 +267,26 @@ fn is_json(headers: &HeaderMap) -> bool {
     mime == "application/json" || (mime.starts_with("application/") && mime.ends_with("+json"))
 }
 
+/// The shortest fit request, for messages.
+const FIT_EXAMPLE: &str = r#"{"kind": "points2d", "points": [[x, y], ...]}"#;
+
+/// A request body the API parses: its shape in one line, for the message that a body of
+/// another JSON type gets.
+pub trait RequestBody: DeserializeOwned {
+    const EXAMPLE: &'static str;
+}
+
+impl RequestBody for super::types::FitRequest {
+    const EXAMPLE: &'static str = FIT_EXAMPLE;
+}
+
+impl RequestBody for super::types::BatchRequest {
+    const EXAMPLE: &'static str =
+        r#"{"requests": [{"kind": "points2d", "points": [[x, y], ...]}, ...]}"#;
+}
+
 /// Parses a JSON body into `T`; errors name the path of the offending value.
-pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+pub fn parse_json<T: RequestBody>(bytes: &[u8]) -> Result<T, ApiError> {
     let mut de = serde_json::Deserializer::from_slice(bytes);
     let parsed = serde_path_to_error::deserialize(&mut de)
         .map_err(|e| e.to_string())
@@ -285,7 +305,7 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         }
         // Every body the API takes is an object: say so rather than name a field of it.
         if bytes.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {
-            return ApiError::not_an_object("the body");
+            return ApiError::not_an_object_like("the body", T::EXAMPLE);
         }
         ApiError::new(ErrorCode::InvalidRequest, message)
     })
@@ -293,7 +313,7 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
 
 impl<S, T> FromRequest<S> for ApiJson<T>
 where
-    T: DeserializeOwned,
+    T: RequestBody,
     S: Send + Sync,
 {
     type Rejection = ApiError;
@@ -305,9 +325,20 @@ where
                 "expected a request with `content-type: application/json`",
             ));
         }
+        let limit = req
+            .extensions()
+            .get::<super::routes::BodyLimit>()
+            .map(|l| l.0);
         let bytes = Bytes::from_request(req, state).await.map_err(|e| {
             if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
-                ApiError::new(ErrorCode::BodyTooLarge, e.body_text())
+                let message = match limit {
+                    Some(n) => format!(
+                        "the body is larger than this server's limit of {n} bytes \
+                         (multifit-server --body-limit)"
+                    ),
+                    None => e.body_text(),
+                };
+                ApiError::new(ErrorCode::BodyTooLarge, message)
             } else {
                 ApiError::new(ErrorCode::BadRequest, e.body_text())
             }

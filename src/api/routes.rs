@@ -159,6 +159,10 @@ pub const ENDPOINTS: [&str; ROUTES.len()] = {
     paths
 };
 
+/// The server's body limit in bytes, for the 413's message ([`super::error::ApiJson`]).
+#[derive(Debug, Clone, Copy)]
+pub struct BodyLimit(pub usize);
+
 /// The full router with every layer, over `state`: the routes of [`ROUTES`], JSON errors for
 /// an unknown route or method, metrics ([`track`]) and the lingering close of request bodies
 /// left unread ([`super::linger`]).
@@ -182,6 +186,7 @@ pub fn router(state: Shared, body_limit: usize) -> Router {
     app.fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(body_limit))
+        .layer(axum::Extension(BodyLimit(body_limit)))
         .layer(middleware::from_fn_with_state(state.clone(), track))
         .layer(middleware::from_fn_with_state(body_limit, linger))
         .layer(TraceLayer::new_for_http().make_span_with(|req: &axum::http::Request<_>| {

@@ -260,6 +260,11 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
     for (what, ct, body, code) in raw {
         let got = send(&app, request(Method::POST, "/v1/fit", ct, body)).await;
         check_error(what, &got, code);
+        if code == E::BodyTooLarge {
+            let message = got.2["error"]["message"].as_str().unwrap();
+            let limit = format!("limit of {BODY_LIMIT} bytes");
+            assert!(message.contains(&limit), "{what}: {message}");
+        }
         seen.insert(code);
     }
     let semantic: Vec<(&str, Value, ErrorCode)> = vec![
@@ -330,8 +335,8 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
             E::InvalidRequest,
         ),
         (
-            "visible flags not 0/1 numbers",
-            json!({"kind": "trajectories", "points": tracks(), "visible": vec![[true, true]; 8]}),
+            "visible flags as strings",
+            json!({"kind": "trajectories", "points": tracks(), "visible": vec![["1", "1"]; 8]}),
             E::InvalidRequest,
         ),
         (
@@ -347,7 +352,12 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
         (
             "visible flag 2",
             json!({"kind": "trajectories", "points": tracks(), "visible": vec![[1, 2]; 8]}),
-            E::InvalidPoints,
+            E::InvalidRequest,
+        ),
+        (
+            "visible flag 0.5",
+            json!({"kind": "trajectories", "points": tracks(), "visible": vec![[1.0, 0.5]; 8]}),
+            E::InvalidRequest,
         ),
         (
             "one track seen throughout",
@@ -455,6 +465,11 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
         let message = got.2["error"]["message"].as_str().unwrap();
         assert!(message.starts_with(expected), "{what}: {message}");
     }
+    // A batch body that is not an object shows the batch's own shape.
+    let got = send(&app, post_to("/v1/fit/batch", &json!([good()]))).await;
+    check_error("an array for a batch body", &got, E::InvalidRequest);
+    let message = got.2["error"]["message"].as_str().unwrap();
+    assert!(message.contains("{\"requests\": ["), "{message}");
     // A message that quotes the request is cut: a long name is not echoed back whole.
     let huge = "x".repeat(4 * crate::api::error::MAX_MESSAGE);
     for (what, body, code) in [
@@ -621,6 +636,34 @@ async fn a_request_without_a_model_gets_the_kinds_default() {
         assert_eq!(status, StatusCode::OK, "{body}");
         assert_eq!(body["model"]["name"], expected, "marked {marked:?}");
     }
+}
+
+/// `visible` takes 0 and 1 as any JSON number, or false and true (a numpy mask's `tolist()`):
+/// the same mask answers the same.
+#[tokio::test]
+async fn visible_flags_may_be_numbers_or_booleans() {
+    let app = service(&state(1, 4, Duration::from_secs(5)));
+    let seen = |one: Value, zero: Value| {
+        let mut rows = vec![json!([one.clone(), one.clone()]); 8];
+        rows[7] = json!([one, zero]);
+        json!({"kind": "trajectories", "points": tracks(), "visible": rows})
+    };
+    let mut answers = Vec::new();
+    for (one, zero) in [
+        (json!(1), json!(0)),
+        (json!(1.0), json!(0.0)),
+        (json!(true), json!(false)),
+    ] {
+        let (status, _, body) = send(&app, post(&seen(one, zero))).await;
+        assert_eq!(status, StatusCode::OK, "{body}");
+        answers.push(body["labels"].clone());
+    }
+    assert!(answers.iter().all(|a| *a == answers[0]), "{answers:?}");
+    // A flag that is neither says what a flag is.
+    let (_, code, body) = send(&app, post(&seen(json!(1), json!(2)))).await;
+    assert_eq!(code, Some(ErrorCode::InvalidRequest));
+    let message = body["error"]["message"].as_str().unwrap();
+    assert!(message.contains("0 or 1, or false or true"), "{message}");
 }
 
 fn rejections(state: &AppState, reason: &str) -> u64 {

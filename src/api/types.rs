@@ -58,10 +58,50 @@ pub struct FitRequest {
     /// A fixed outlier threshold in the caller's units instead of the estimated one.
     #[serde(default)]
     pub outlier_threshold: Option<f64>,
-    /// Trajectories: N x F flags, 1 where track i was seen in frame f, 0 where it was not (its
-    /// values there are ignored).
+    /// Trajectories: N x F flags, 1 (or true) where track i was seen in frame f, 0 (or false)
+    /// where it was not (its values there are ignored).
     #[serde(default)]
-    pub visible: Option<Vec<Vec<i64>>>,
+    pub visible: Option<Vec<Vec<Seen>>>,
+}
+
+/// One flag of `visible`: 0 or 1 as any JSON number (`1`, `1.0`), or false or true, as a numpy
+/// mask's `tolist()` gives it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Seen(pub bool);
+
+impl<'de> Deserialize<'de> for Seen {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Flag;
+        impl serde::de::Visitor<'_> for Flag {
+            type Value = Seen;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("0 or 1, or false or true")
+            }
+            fn visit_bool<E: serde::de::Error>(self, v: bool) -> Result<Seen, E> {
+                Ok(Seen(v))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Seen, E> {
+                match v {
+                    0 | 1 => Ok(Seen(v == 1)),
+                    _ => Err(E::invalid_value(serde::de::Unexpected::Unsigned(v), &self)),
+                }
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Seen, E> {
+                match v {
+                    0 | 1 => Ok(Seen(v == 1)),
+                    _ => Err(E::invalid_value(serde::de::Unexpected::Signed(v), &self)),
+                }
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Seen, E> {
+                if v == 0.0 || v == 1.0 {
+                    Ok(Seen(v == 1.0))
+                } else {
+                    Err(E::invalid_value(serde::de::Unexpected::Float(v), &self))
+                }
+            }
+        }
+        deserializer.deserialize_any(Flag)
+    }
 }
 
 /// `POST /v1/fit/batch` body as sent; entries are parsed one by one so that a bad entry gets
@@ -203,6 +243,13 @@ impl FitRequest {
                 format!("k_max must be between 1 and {}", limits.max_k_max),
             ));
         }
+        if self.k.is_some() && (self.k_max.is_some() || self.selection.is_some()) {
+            return Err(ApiError::new(
+                ErrorCode::InvalidRequest,
+                "k gives the number of structures, k_max and selection choose it: send k alone, \
+                 or k_max and selection without k",
+            ));
+        }
         let selection = match (self.k, self.selection.as_deref()) {
             (Some(k), _) => {
                 if k == 0 || k > n {
@@ -267,6 +314,10 @@ impl FitRequest {
                 ));
             }
             Some(rows) => {
+                let rows: Vec<Vec<bool>> = rows
+                    .iter()
+                    .map(|r| r.iter().map(|f| f.0).collect())
+                    .collect();
                 let v = Visibility::new(&rows, n, points.dim() / 2)?;
                 let complete = v.complete().len();
                 if let Selection::Fixed(k) = selection

@@ -100,12 +100,6 @@ pub enum InputError {
         found: usize,
         frames: usize,
     },
-    #[error("visible row {row}, frame {frame} is {value}: flags are 0 (not seen) or 1 (seen)")]
-    VisibleValue {
-        row: usize,
-        frame: usize,
-        value: i64,
-    },
     #[error(
         "only {complete} tracks are seen in every frame; a fit needs at least 2 (the others are \
          placed on the motions those tracks give)"

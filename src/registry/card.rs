@@ -211,6 +211,8 @@ pub struct ValidatedRange {
 /// What a fit saw, measured against a [`ValidatedRange`].
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Observed {
+    /// What the rows counted in `points` are, for the warning ("points" when empty).
+    pub rows: &'static str,
     pub points: usize,
     /// The smallest and largest structure of the answer.
     pub points_per_structure: Option<[usize; 2]>,
@@ -219,17 +221,32 @@ pub struct Observed {
     pub outlier_ratio: Option<f64>,
 }
 
+/// Which side of a validated range a quantity is checked on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Side {
+    Both,
+    /// Only below the range: above it is no harder (a larger image whose coordinates scale
+    /// with it is the same input, normalised, with less relative noise).
+    Below,
+    /// Only above the range: below it is no harder (an outlier share smaller than validated).
+    Above,
+}
+
 impl ValidatedRange {
     /// One warning per observed quantity outside its bounds, naming it, its value and the range.
+    /// Points, structure sizes and frames are checked on both sides; the image side only below
+    /// the range (inputs are normalised by the image, so a rescaled image answers the same), the
+    /// outlier share only above it.
     pub fn warnings(&self, seen: &Observed) -> Vec<String> {
         fn out<T: PartialOrd + std::fmt::Display + Copy>(
             name: &str,
             value: Option<T>,
             range: Option<[T; 2]>,
+            side: Side,
             warnings: &mut Vec<String>,
         ) {
             if let (Some(v), Some([lo, hi])) = (value, range)
-                && (v < lo || v > hi)
+                && ((v < lo && side != Side::Above) || (v > hi && side != Side::Below))
             {
                 warnings.push(format!(
                     "{name} {v} is outside the range the model was validated on ({lo} to {hi})"
@@ -237,16 +254,45 @@ impl ValidatedRange {
             }
         }
         let mut w = Vec::new();
-        out("points", Some(seen.points), self.points, &mut w);
+        let rows = if seen.rows.is_empty() {
+            "points"
+        } else {
+            seen.rows
+        };
+        out(rows, Some(seen.points), self.points, Side::Both, &mut w);
         if let Some([small, large]) = seen.points_per_structure {
             let range = self.points_per_structure;
-            out("smallest structure's points", Some(small), range, &mut w);
-            out("largest structure's points", Some(large), range, &mut w);
+            out(
+                "smallest structure's points",
+                Some(small),
+                range,
+                Side::Both,
+                &mut w,
+            );
+            out(
+                "largest structure's points",
+                Some(large),
+                range,
+                Side::Both,
+                &mut w,
+            );
         }
-        out("frames", seen.frames, self.frames, &mut w);
-        out("image side", seen.image_side, self.image_side, &mut w);
+        out("frames", seen.frames, self.frames, Side::Both, &mut w);
+        out(
+            "image side",
+            seen.image_side,
+            self.image_side,
+            Side::Below,
+            &mut w,
+        );
         let ratio = seen.outlier_ratio.map(|v| (v * 1e3).round() / 1e3);
-        out("outlier ratio", ratio, self.outlier_ratio, &mut w);
+        out(
+            "outlier ratio",
+            ratio,
+            self.outlier_ratio,
+            Side::Above,
+            &mut w,
+        );
         w
     }
 }
@@ -499,6 +545,7 @@ mod tests {
             source: String::new(),
         };
         let inside = Observed {
+            rows: "",
             points: 300,
             points_per_structure: Some([40, 200]),
             frames: Some(5),
@@ -507,10 +554,11 @@ mod tests {
         };
         assert!(range.warnings(&inside).is_empty());
         let outside = Observed {
+            rows: "",
             points: 50,
             points_per_structure: Some([3, 900]),
             frames: Some(29),
-            image_side: Some(4000.0),
+            image_side: Some(300.0),
             outlier_ratio: Some(0.75),
         };
         let w = range.warnings(&outside);
@@ -520,11 +568,32 @@ mod tests {
             "smallest structure's points 3",
             "largest structure's points 900",
             "frames 29",
-            "image side 4000",
+            "image side 300",
             "outlier ratio 0.75",
         ] {
             assert!(w.iter().any(|m| m.starts_with(name)), "{name}: {w:?}");
         }
+        // An image larger than validated, or fewer outliers, is not harder: no warning.
+        let easier = Observed {
+            image_side: Some(4000.0),
+            outlier_ratio: Some(0.0),
+            ..inside
+        };
+        let narrow = ValidatedRange {
+            outlier_ratio: Some([0.05, 0.5]),
+            ..range.clone()
+        };
+        assert!(
+            narrow.warnings(&easier).is_empty(),
+            "{:?}",
+            narrow.warnings(&easier)
+        );
+        // The rows counted are named as the fit says.
+        let seen = Observed {
+            rows: "tracks seen in every frame",
+            ..outside
+        };
+        assert!(range.warnings(&seen)[0].starts_with("tracks seen in every frame 50 is outside"));
         // A card without a range never warns.
         let card = tiny(vec![]).card;
         assert!(card.warnings(&outside).is_empty());
