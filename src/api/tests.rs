@@ -666,6 +666,51 @@ async fn visible_flags_may_be_numbers_or_booleans() {
     assert!(message.contains("0 or 1, or false or true"), "{message}");
 }
 
+/// A position `visible` marks unseen may be sent as null (a tracker's missing value), in
+/// `points` or `trajectory_matrix`; a null anywhere else is refused with its place.
+#[tokio::test]
+async fn unseen_positions_may_be_null() {
+    let app = service(&state(1, 4, Duration::from_secs(5)));
+    let mut seen = vec![json!([1, 1]); 8];
+    seen[7] = json!([1, 0]);
+    let with = |rows: Value| json!({"kind": "trajectories", "points": rows, "visible": seen});
+    let mut nulled = tracks();
+    nulled[7][2] = Value::Null;
+    nulled[7][3] = Value::Null;
+    let (status, _, numbers) = send(&app, post(&with(tracks()))).await;
+    assert_eq!(status, StatusCode::OK, "{numbers}");
+    let (status, _, nulls) = send(&app, post(&with(nulled.clone()))).await;
+    assert_eq!(status, StatusCode::OK, "{nulls}");
+    assert_eq!(nulls["labels"], numbers["labels"]);
+    // The same as a 2F x N matrix: row 2f + 1 holds the y of frame f.
+    let rows = tracks();
+    let matrix: Vec<Vec<Value>> = (0..4)
+        .map(|c| (0..8).map(|i| rows[i][c].clone()).collect())
+        .collect();
+    let mut matrix = json!(matrix);
+    matrix[2][7] = Value::Null;
+    matrix[3][7] = Value::Null;
+    let body = json!({"kind": "trajectories", "trajectory_matrix": matrix, "visible": seen});
+    let (status, _, answer) = send(&app, post(&body)).await;
+    assert_eq!(status, StatusCode::OK, "{answer}");
+    assert_eq!(answer["labels"], numbers["labels"]);
+    // Null where the track was seen, or without visible: refused, naming the place.
+    let mut wrong = tracks();
+    wrong[6][1] = Value::Null;
+    for body in [
+        with(wrong),
+        json!({"kind": "trajectories", "points": nulled}),
+    ] {
+        let got = send(&app, post(&body)).await;
+        check_error("null where seen", &got, ErrorCode::InvalidRequest);
+        let message = got.2["error"]["message"].as_str().unwrap();
+        assert!(
+            message.contains("null only marks a track position not seen"),
+            "{message}"
+        );
+    }
+}
+
 fn rejections(state: &AppState, reason: &str) -> u64 {
     state
         .telemetry

@@ -28,9 +28,9 @@ pub struct Limits {
 pub struct FitRequest {
     pub kind: String,
     #[serde(default)]
-    pub points: Option<Vec<Vec<f64>>>,
+    pub points: Option<Vec<Vec<Coord>>>,
     #[serde(default)]
-    pub trajectory_matrix: Option<Vec<Vec<f64>>>,
+    pub trajectory_matrix: Option<Vec<Vec<Coord>>>,
     #[serde(default)]
     pub model: Option<String>,
     /// `[width, height]`; its length is checked with the other fields, with a clear message.
@@ -62,6 +62,93 @@ pub struct FitRequest {
     /// where it was not (its values there are ignored).
     #[serde(default)]
     pub visible: Option<Vec<Vec<Seen>>>,
+}
+
+/// One coordinate as sent: a number, or null (NaN here) for a track's position in a frame
+/// `visible` marks unseen ([`fill_unseen`] checks and replaces it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Coord(pub f64);
+
+impl<'de> Deserialize<'de> for Coord {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Value;
+        impl serde::de::Visitor<'_> for Value {
+            type Value = Coord;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a number, or null for a track position not seen")
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Coord, E> {
+                Ok(Coord(v))
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Coord, E> {
+                Ok(Coord(v as f64))
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Coord, E> {
+                Ok(Coord(v as f64))
+            }
+            fn visit_unit<E: serde::de::Error>(self) -> Result<Coord, E> {
+                Ok(Coord(f64::NAN))
+            }
+            fn visit_none<E: serde::de::Error>(self) -> Result<Coord, E> {
+                Ok(Coord(f64::NAN))
+            }
+        }
+        deserializer.deserialize_any(Value)
+    }
+}
+
+/// Where a coordinate sits: `points` rows (a row per track) or `trajectory_matrix` rows (a row
+/// per frame coordinate, a column per track).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Layout {
+    Rows,
+    Matrix,
+}
+
+/// `rows` as numbers, a null (NaN) replaced by 0 where `visible` marks the track unseen in that
+/// frame (its value is ignored there). A null anywhere else is refused with its place.
+fn fill_unseen(
+    rows: Vec<Vec<Coord>>,
+    visible: Option<&[Vec<Seen>]>,
+    layout: Layout,
+) -> Result<Vec<Vec<f64>>, ApiError> {
+    let field = match layout {
+        Layout::Rows => "points",
+        Layout::Matrix => "trajectory_matrix",
+    };
+    rows.into_iter()
+        .enumerate()
+        .map(|(r, row)| {
+            row.into_iter()
+                .enumerate()
+                .map(|(c, v)| {
+                    if !v.0.is_nan() {
+                        return Ok(v.0);
+                    }
+                    let (track, frame) = match layout {
+                        Layout::Rows => (r, c / 2),
+                        Layout::Matrix => (c, r / 2),
+                    };
+                    let unseen = visible
+                        .and_then(|v| v.get(track))
+                        .and_then(|t| t.get(frame))
+                        .is_some_and(|f| !f.0);
+                    if unseen {
+                        Ok(0.0)
+                    } else {
+                        Err(ApiError::new(
+                            ErrorCode::InvalidRequest,
+                            format!(
+                                "{field}[{r}][{c}] is null: coordinates are numbers, and null \
+                                 only marks a track position not seen, where visible \
+                                 (trajectories) has 0 for track {track}, frame {frame}"
+                            ),
+                        ))
+                    }
+                })
+                .collect()
+        })
+        .collect()
 }
 
 /// One flag of `visible`: 0 or 1 as any JSON number (`1`, `1.0`), or false or true, as a numpy
@@ -174,6 +261,7 @@ impl FitRequest {
             }
             (Some(rows), None) => {
                 check_size(rows.len(), rows.first().map_or(0, |r| r.len()), limits)?;
+                let rows = fill_unseen(rows, self.visible.as_deref(), Layout::Rows)?;
                 PointSet::from_rows(kind, &rows)?
             }
             (None, Some(matrix)) => {
@@ -184,6 +272,7 @@ impl FitRequest {
                     ));
                 }
                 check_size(matrix.first().map_or(0, |r| r.len()), matrix.len(), limits)?;
+                let matrix = fill_unseen(matrix, self.visible.as_deref(), Layout::Matrix)?;
                 PointSet::from_trajectory_matrix(&matrix)?
             }
         };
