@@ -277,7 +277,7 @@ pub fn refine_on(
             let room = k_chosen.map_or(0, |k_max| {
                 k_max.saturating_sub(live.iter().flatten().count())
             });
-            for swap in hypotheses::swaps(points, &live, family, threshold, room) {
+            for swap in hypotheses::swaps(points, &live, family, threshold, room, threads) {
                 let group = Some(Group {
                     fit: swap.fit,
                     fitted_on: Vec::new(),

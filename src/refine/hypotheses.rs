@@ -37,6 +37,7 @@
 
 use crate::data::PointSet;
 use crate::geometry::{self, Family, Fit, Model};
+use crate::threads::Threads;
 
 /// Neighbourhoods proposed per fit.
 pub const ANCHORS: usize = 32;
@@ -64,13 +65,16 @@ pub struct Swap {
 /// The swaps (and up to `may_add` added structures) that lower the cost of explaining
 /// `points` by `current` (one model per slot, `None` for slots not to be touched), each
 /// hypothesis fitted on neighbourhoods of `points` and grown within `threshold`.
-/// `points` `[n, d]` -> the models brought in, at most one per slot.
+/// `points` `[n, d]` -> the models brought in, at most one per slot. Proposals and their costs
+/// run side by side on `threads` (call inside [`Threads::install`]), with the same answer on
+/// any number of them.
 pub fn swaps(
     points: &PointSet,
     current: &[Option<&Model>],
     family: Family,
     threshold: f64,
     may_add: usize,
+    threads: &Threads,
 ) -> Vec<Swap> {
     let slots: Vec<usize> = (0..current.len())
         .filter(|&j| current[j].is_some())
@@ -86,12 +90,13 @@ pub fn swaps(
             .collect()
     };
     // The pool: the current models first (pool index = position in `slots`), then hypotheses.
-    let mut pool: Vec<Vec<f64>> = slots
-        .iter()
-        .map(|&j| cost_row(current[j].expect("live slot")))
-        .collect();
-    let hypotheses = propose(points, &rows, family, threshold);
-    pool.extend(hypotheses.iter().map(cost_row));
+    let hypotheses = propose(points, &rows, family, threshold, threads);
+    let pool: Vec<Vec<f64>> = threads.map_n(slots.len() + hypotheses.len(), |h| {
+        match h.checked_sub(slots.len()) {
+            Some(i) => cost_row(&hypotheses[i]),
+            None => cost_row(current[slots[h]].expect("live slot")),
+        }
+    });
     let label_cost = label_cost(family, rows.len()) * tau2;
     let mut chosen: Vec<usize> = (0..slots.len()).collect();
     for _ in 0..MAX_SWAPS {
@@ -155,29 +160,48 @@ fn seen_rows(n: usize) -> Vec<usize> {
 }
 
 /// Hypotheses of every type of `family`, each fitted on one neighbourhood of the `rows` of
-/// `points` and grown within `threshold`.
-fn propose(points: &PointSet, rows: &[usize], family: Family, threshold: f64) -> Vec<Model> {
+/// `points` and grown within `threshold`. A neighbourhood that a hypothesis of the same type
+/// already explains gives none (it would give that one again). On one thread the hypotheses are
+/// grown as the search goes, only where needed; on more, every neighbourhood's are grown side
+/// by side first, and the same ones kept.
+fn propose(
+    points: &PointSet,
+    rows: &[usize],
+    family: Family,
+    threshold: f64,
+    threads: &Threads,
+) -> Vec<Model> {
     let types = family.candidates();
     let size = (NEIGHBOURHOOD_FACTOR * family.largest_sample()).max(MIN_NEIGHBOURHOOD);
     if rows.len() < size {
         return Vec::new();
     }
     let anchors = ANCHORS.min(rows.len());
+    let hood_of = |a: usize| neighbourhood(points, rows, rows[a * rows.len() / anchors], size);
+    let hoods: Vec<Vec<usize>> = threads.map_n(anchors, hood_of);
+    let grown: Option<Vec<Option<Model>>> = (threads.count() > 1).then(|| {
+        threads.map_n(anchors * types.len(), |j| {
+            let (a, t) = (j / types.len(), j % types.len());
+            grow(points, rows, types[t], &hoods[a], threshold)
+        })
+    });
     let mut out: Vec<Model> = Vec::new();
-    for a in 0..anchors {
-        let anchor = rows[a * rows.len() / anchors];
-        let hood = neighbourhood(points, rows, anchor, size);
-        for t in types {
-            // A neighbourhood a hypothesis of this type already explains would give it again.
+    for (a, hood) in hoods.iter().enumerate() {
+        for (t, name) in types.iter().enumerate() {
             let known = out.iter().any(|m| {
-                m.type_name() == *t
+                m.type_name() == *name
                     && hood
                         .iter()
                         .all(|&i| m.residual_capped(points.row(i), threshold) < threshold)
             });
-            if !known {
-                out.extend(grow(points, rows, t, &hood, threshold));
+            if known {
+                continue;
             }
+            let model = match &grown {
+                Some(grown) => grown[a * types.len() + t].clone(),
+                None => grow(points, rows, name, hood, threshold),
+            };
+            out.extend(model);
         }
     }
     out
@@ -380,13 +404,14 @@ mod tests {
             vec![0.0, 0.0, 1.0, 0.0, 2.0, 0.0],
         )
         .unwrap();
-        assert!(propose(&three, &[0, 1, 2], Family::Curves, 0.1).is_empty());
+        let one = Threads::default();
+        assert!(propose(&three, &[0, 1, 2], Family::Curves, 0.1, &one).is_empty());
         let line = Model::Line {
             a: 0.0,
             b: 1.0,
             c: 0.0,
         };
-        assert!(swaps(&three, &[Some(&line)], Family::Curves, 0.1, 2).is_empty());
-        assert!(swaps(&three, &[Some(&line)], Family::Curves, f64::NAN, 2).is_empty());
+        assert!(swaps(&three, &[Some(&line)], Family::Curves, 0.1, 2, &one).is_empty());
+        assert!(swaps(&three, &[Some(&line)], Family::Curves, f64::NAN, 2, &one).is_empty());
     }
 }
