@@ -2,7 +2,7 @@
 //! the same shapes as the floor), k-means with K selection, the whole fit of a shipped model,
 //! geometric refinement, the SVG picture of a fit, and training steps.
 //! Run: `cargo bench --bench core` (add `-- quick` for fewer repetitions, and section names,
-//! e.g. `-- refine`, to run only those; `-- refine curves` runs one family's refinement rows:
+//! e.g. `-- refine`, to run only those; `-- curves` runs one family's refinement rows:
 //! curves, homography or subspace). Prints medians.
 
 use std::time::Instant;
@@ -51,12 +51,16 @@ fn main() {
         .map(String::as_str)
         .filter(|a| !a.starts_with('-') && *a != "quick")
         .collect();
+    // A family name (curves, homography, subspace) picks refinement rows, and the refine section.
     let families = ["curves", "homography", "subspace"];
-    let family_named = |name: &str| {
-        !named.iter().any(|a| families.contains(a)) || named.iter().any(|a| name.ends_with(a))
+    let (picked, sections): (Vec<&str>, Vec<&str>) =
+        named.iter().partition(|a| families.contains(a));
+    let family_named = |name: &str| picked.is_empty() || picked.iter().any(|a| name.ends_with(a));
+    let wanted = |section: &str| {
+        named.is_empty()
+            || sections.contains(&section)
+            || (section == "refine" && !picked.is_empty())
     };
-    let wanted =
-        |section: &str| named.iter().all(|a| families.contains(a)) || named.contains(&section);
     let reps = if quick { 3 } else { 15 };
     let device = cpu_device();
     device.seed(0);

@@ -507,6 +507,7 @@ fn fit_counting(
     if let Selection::Fixed(asked) = params.selection() {
         warnings.extend(fewer_than_asked(asked, k));
     }
+    warnings.extend(image_barely_used(points, image));
     Ok(FitOutcome {
         warnings,
         clustering,
@@ -1020,6 +1021,35 @@ fn fewer_than_asked(asked: usize, answered: usize) -> Option<String> {
     ))
 }
 
+/// Points that span under this share of the image's longer side sit in a corner of what the
+/// network reads (inputs are normalised by the image): [`image_barely_used`].
+const MIN_IMAGE_SPAN: f64 = 0.1;
+
+/// The warning of pixel coordinates that span under [`MIN_IMAGE_SPAN`] of the `image` given
+/// (along x and along y, over every view or frame): most often an image size that is not the
+/// one the coordinates were measured in. `None` for points2d, without an image, or when the
+/// points use the image.
+fn image_barely_used(points: &PointSet, image: Option<ImageSize>) -> Option<String> {
+    let image = image.filter(|_| points.kind() != Kind::Points2d)?;
+    let mut bounds = [[f64::INFINITY, f64::NEG_INFINITY]; 2];
+    for i in 0..points.len() {
+        for (c, &v) in points.row(i).iter().enumerate() {
+            let b = &mut bounds[c % 2];
+            b[0] = b[0].min(v);
+            b[1] = b[1].max(v);
+        }
+    }
+    let span = bounds.iter().map(|[lo, hi]| hi - lo).fold(0.0, f64::max);
+    let side = image.width.max(image.height);
+    (span < MIN_IMAGE_SPAN * side).then(|| {
+        format!(
+            "the points span {} px of the {side} px image: check that image_size is the size \
+             of the image the coordinates were measured in",
+            span.round()
+        )
+    })
+}
+
 /// `labels` with group `out` answered -1 and the groups after it numbered one lower.
 fn without_group(labels: &[usize], out: usize) -> Vec<i64> {
     labels
@@ -1117,6 +1147,24 @@ pub(crate) mod tests {
         );
         assert_eq!(without_group(&[2, 0, 1], 2), vec![-1, 0, 1]);
         assert_eq!(without_group(&[0, 1], 0), vec![-1, 0]);
+    }
+
+    #[test]
+    fn points_in_a_corner_of_the_image_say_so() {
+        // x from 0 to 38, y from 1 to 39.
+        let values: Vec<f64> = (0..40).map(f64::from).collect();
+        let pairs = PointSet::from_flat(Kind::Correspondences, 4, values.clone()).unwrap();
+        let image = |w, h| Some(ImageSize::new(w, h).unwrap());
+        assert_eq!(image_barely_used(&pairs, None), None);
+        assert_eq!(image_barely_used(&pairs, image(380.0, 200.0)), None);
+        let w = image_barely_used(&pairs, image(4000.0, 3000.0)).unwrap();
+        assert!(
+            w.starts_with("the points span 38 px of the 4000 px image"),
+            "{w}"
+        );
+        // Curves have no image.
+        let curve = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
+        assert_eq!(image_barely_used(&curve, image(4000.0, 3000.0)), None);
     }
 
     #[test]

@@ -667,48 +667,87 @@ async fn visible_flags_may_be_numbers_or_booleans() {
 }
 
 /// A position `visible` marks unseen may be sent as null (a tracker's missing value), in
-/// `points` or `trajectory_matrix`; a null anywhere else is refused with its place.
+/// `points` or `trajectory_matrix`, and answers as any number there would; a null anywhere
+/// else is refused with its place.
 #[tokio::test]
 async fn unseen_positions_may_be_null() {
     let app = service(&state(1, 4, Duration::from_secs(5)));
-    let mut seen = vec![json!([1, 1]); 8];
-    seen[7] = json!([1, 0]);
-    let with = |rows: Value| json!({"kind": "trajectories", "points": rows, "visible": seen});
-    let mut nulled = tracks();
-    nulled[7][2] = Value::Null;
-    nulled[7][3] = Value::Null;
-    let (status, _, numbers) = send(&app, post(&with(tracks()))).await;
+    // Ten 4-frame tracks of two motions (one drifts right, one down and left); the last track
+    // is not seen in frame 2, and is placed by the three frames it was seen in.
+    let rows: Vec<Vec<f64>> = (0..10)
+        .map(|i| {
+            let (x, y) = (
+                f64::from(i % 5) * 3.0,
+                f64::from(i % 3) * 2.0 + 40.0 * f64::from(i / 5),
+            );
+            (0..4)
+                .flat_map(|f| {
+                    let t = f64::from(f);
+                    if i < 5 {
+                        [x + 4.0 * t, y + 0.1 * t * t]
+                    } else {
+                        [x - 2.0 * t, y + 3.0 * t]
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let mut seen = vec![json!([1, 1, 1, 1]); 10];
+    seen[9] = json!([1, 1, 0, 1]);
+    let with =
+        |rows: Value| json!({"kind": "trajectories", "points": rows, "k": 2, "visible": seen});
+    let mut nulled = json!(rows);
+    nulled[9][4] = Value::Null;
+    nulled[9][5] = Value::Null;
+    let (status, _, numbers) = send(&app, post(&with(json!(rows)))).await;
     assert_eq!(status, StatusCode::OK, "{numbers}");
+    assert!(numbers["labels"][9].as_i64().unwrap() >= 0, "{numbers}");
     let (status, _, nulls) = send(&app, post(&with(nulled.clone()))).await;
     assert_eq!(status, StatusCode::OK, "{nulls}");
     assert_eq!(nulls["labels"], numbers["labels"]);
     // The same as a 2F x N matrix: row 2f + 1 holds the y of frame f.
-    let rows = tracks();
-    let matrix: Vec<Vec<Value>> = (0..4)
-        .map(|c| (0..8).map(|i| rows[i][c].clone()).collect())
+    let matrix: Vec<Vec<Value>> = (0..8)
+        .map(|c| (0..10).map(|i| json!(rows[i][c])).collect())
         .collect();
     let mut matrix = json!(matrix);
-    matrix[2][7] = Value::Null;
-    matrix[3][7] = Value::Null;
-    let body = json!({"kind": "trajectories", "trajectory_matrix": matrix, "visible": seen});
+    matrix[4][9] = Value::Null;
+    matrix[5][9] = Value::Null;
+    let body = json!({"kind": "trajectories", "trajectory_matrix": matrix.clone(), "k": 2, "visible": seen});
     let (status, _, answer) = send(&app, post(&body)).await;
     assert_eq!(status, StatusCode::OK, "{answer}");
     assert_eq!(answer["labels"], numbers["labels"]);
-    // Null where the track was seen, or without visible: refused, naming the place.
-    let mut wrong = tracks();
+    // Null where the track was seen, or without visible, in either layout: refused, naming
+    // the place; in points2d, a null is just not a number.
+    let mut wrong = json!(rows);
     wrong[6][1] = Value::Null;
-    for body in [
-        with(wrong),
-        json!({"kind": "trajectories", "points": nulled}),
+    for (body, place) in [
+        (with(wrong), "points[6][1]"),
+        (
+            json!({"kind": "trajectories", "points": nulled}),
+            "points[9][4]",
+        ),
+        (
+            json!({"kind": "trajectories", "trajectory_matrix": matrix}),
+            "trajectory_matrix[4][9]",
+        ),
     ] {
         let got = send(&app, post(&body)).await;
-        check_error("null where seen", &got, ErrorCode::InvalidRequest);
+        check_error(place, &got, ErrorCode::InvalidRequest);
         let message = got.2["error"]["message"].as_str().unwrap();
+        assert!(
+            message.starts_with(&format!("{place} is null")),
+            "{message}"
+        );
         assert!(
             message.contains("null only marks a track position not seen"),
             "{message}"
         );
     }
+    let curve = json!({"kind": "points2d", "points": [[0, 0], [1, null], [2, 2]]});
+    let got = send(&app, post(&curve)).await;
+    check_error("null in points2d", &got, ErrorCode::InvalidRequest);
+    let message = got.2["error"]["message"].as_str().unwrap();
+    assert_eq!(message, "points[1][1] is null: coordinates are numbers");
 }
 
 fn rejections(state: &AppState, reason: &str) -> u64 {

@@ -111,6 +111,7 @@ fn fill_unseen(
     rows: Vec<Vec<Coord>>,
     visible: Option<&[Vec<Seen>]>,
     layout: Layout,
+    kind: Kind,
 ) -> Result<Vec<Vec<f64>>, ApiError> {
     let field = match layout {
         Layout::Rows => "points",
@@ -133,17 +134,19 @@ fn fill_unseen(
                         .and_then(|v| v.get(track))
                         .and_then(|t| t.get(frame))
                         .is_some_and(|f| !f.0);
-                    if unseen {
+                    let message = if kind != Kind::Trajectories {
+                        format!("{field}[{r}][{c}] is null: coordinates are numbers")
+                    } else {
+                        format!(
+                            "{field}[{r}][{c}] is null: coordinates are numbers, and null only \
+                             marks a track position not seen, where visible has 0 for track \
+                             {track}, frame {frame}"
+                        )
+                    };
+                    if unseen && kind == Kind::Trajectories {
                         Ok(0.0)
                     } else {
-                        Err(ApiError::new(
-                            ErrorCode::InvalidRequest,
-                            format!(
-                                "{field}[{r}][{c}] is null: coordinates are numbers, and null \
-                                 only marks a track position not seen, where visible \
-                                 (trajectories) has 0 for track {track}, frame {frame}"
-                            ),
-                        ))
+                        Err(ApiError::new(ErrorCode::InvalidRequest, message))
                     }
                 })
                 .collect()
@@ -168,10 +171,7 @@ impl<'de> Deserialize<'de> for Seen {
                 Ok(Seen(v))
             }
             fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Seen, E> {
-                match v {
-                    0 | 1 => Ok(Seen(v == 1)),
-                    _ => Err(E::invalid_value(serde::de::Unexpected::Unsigned(v), &self)),
-                }
+                self.visit_i64(i64::try_from(v).unwrap_or(i64::MAX))
             }
             fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Seen, E> {
                 match v {
@@ -211,7 +211,8 @@ pub struct FitJob {
     pub test_symmetries: bool,
     /// Geometric refinement, or `None` for the learned clustering alone.
     pub refine: Option<RefineParams>,
-    /// Without refinement, whether a k given may answer the network's outlier group -1.
+    /// Without refinement, whether the network's outlier group may be answered -1 (with k
+    /// given or chosen; see [`crate::pipeline::FitOptions::outlier_group`]).
     pub outlier_group: bool,
     /// Which frames each track was seen in, when the request said (trajectories).
     pub visibility: Option<Visibility>,
@@ -261,7 +262,7 @@ impl FitRequest {
             }
             (Some(rows), None) => {
                 check_size(rows.len(), rows.first().map_or(0, |r| r.len()), limits)?;
-                let rows = fill_unseen(rows, self.visible.as_deref(), Layout::Rows)?;
+                let rows = fill_unseen(rows, self.visible.as_deref(), Layout::Rows, kind)?;
                 PointSet::from_rows(kind, &rows)?
             }
             (None, Some(matrix)) => {
@@ -272,7 +273,7 @@ impl FitRequest {
                     ));
                 }
                 check_size(matrix.first().map_or(0, |r| r.len()), matrix.len(), limits)?;
-                let matrix = fill_unseen(matrix, self.visible.as_deref(), Layout::Matrix)?;
+                let matrix = fill_unseen(matrix, self.visible.as_deref(), Layout::Matrix, kind)?;
                 PointSet::from_trajectory_matrix(&matrix)?
             }
         };

@@ -25,12 +25,12 @@
 //! one, from the point's own elliptic angle, for points near the curve),
 //! then two guarded Newton steps on the foot-point equation
 //! g(φ) = (b² − a²)·sin φ·cos φ + a·|u|·sin φ − b·|v|·cos φ = 0 with foot (a cos φ, b sin φ),
-//! also trig-free. Within a Levenberg–Marquardt refinement each evaluation starts every point's
-//! search from its foot at the evaluation before (Newton steps alone, to a step below 10⁻¹²
-//! rad, at most four; the full search where they do not converge). Within 1e-9 of b (or of the distance, far away) of a brute-force search in
-//! the tests, for a/b up to 20, near and far from the curve. The reweighting rounds of the
-//! robust fit use the cheaper Sampson distance |Q|/‖∇Q‖ instead; the final inlier decision and
-//! the refinement use this one.
+//! also trig-free. Within 1e-9 of b (or of the distance, far away) of a brute-force search in
+//! the tests, for a/b up to 20, near and far from the curve. Within a Levenberg–Marquardt
+//! refinement each evaluation starts every point's search from its foot at the evaluation
+//! before (Newton steps alone, to a step below 10⁻¹² rad, at most four; the full search where
+//! they do not converge). The reweighting rounds of the robust fit use the cheaper Sampson
+//! distance |Q|/‖∇Q‖ instead; the final inlier decision and the refinement use this one.
 //!
 //! **Geometric refinement of the ellipse.** With the foot φ_i and the unit outward normal n_i
 //! there, the signed distance d_i = n_iᵀ(p_i − X(φ_i)) has ∂d/∂θ = −n_iᵀ ∂X/∂θ at fixed φ (the
@@ -719,6 +719,48 @@ mod tests {
 
     fn angle_diff(t1: f64, t2: f64) -> f64 {
         normalise_angle(t1 - t2).abs()
+    }
+
+    /// The refinement's evaluations with the feet of the evaluations before (the cache a
+    /// Levenberg–Marquardt run leaves) equal fresh ones at the same state, with the axes as
+    /// given or swapped (the cache is reset when the frame swaps).
+    #[test]
+    fn cached_feet_evaluate_as_fresh_ones() {
+        let mut rng = Rng::new(11);
+        let truth = [0.3, -0.2, 2.0, 1.0, 0.4];
+        let rows = ellipse_rows(&mut rng, truth, 120, 0.0, 5.0, 0.05, 0);
+        let problem = |rows: &[Vec<f64>]| EllipseProblem {
+            points: rows.iter().map(|r| [r[0], r[1]]).collect(),
+            weights: vec![1.0; rows.len()],
+            feet: std::cell::RefCell::new((false, vec![None; rows.len()])),
+        };
+        let warm = problem(&rows);
+        let start = [0.25, -0.15, 2.1, 0.95, 0.45];
+        let end = minimise(&warm, start, REFINE_EVALUATIONS).unwrap().state;
+        assert!(warm.feet.borrow().1.iter().all(Option::is_some));
+        let swapped = [end[0], end[1], end[3], end[2], end[4] + FRAC_PI_2];
+        for state in [end, swapped, start] {
+            let (c1, a1, g1) = warm.normal_equations(&state).unwrap();
+            let (c0, a0, g0) = problem(&rows).normal_equations(&state).unwrap();
+            assert!((c1 - c0).abs() <= 1e-12 * c0, "{state:?}: {c1} vs {c0}");
+            // The full search itself is exact to about 1e-9 of b: entries agree to that order
+            // relative to the normal matrix's scale.
+            let scale = a0.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let worst = |x: &[f64], y: &[f64]| {
+                x.iter()
+                    .zip(y)
+                    .map(|(p, q)| (p - q).abs())
+                    .fold(0.0f64, f64::max)
+            };
+            assert!(
+                worst(&a1, &a0) <= 1e-7 * scale,
+                "{state:?}: {a1:?} vs {a0:?}"
+            );
+            assert!(
+                worst(&g1, &g0) <= 1e-8 * scale,
+                "{state:?}: {g1:?} vs {g0:?}"
+            );
+        }
     }
 
     /// A foot searched from one close by (what Levenberg–Marquardt's evaluations pass on) is

@@ -1,0 +1,41 @@
+"""Two servers, the same fits: every LCE set of the given gen-lce directories fitted by both, with
+K chosen and with the true K; counts the fits whose labels agree and gives each server's mean
+error (outliers, -1, as a group of their own). For a change that should not move any answer
+(speed work): run the build before it on one port and the build after it on another.
+
+  python3 research/same-answers.py PORT_A PORT_B DIR [DIR ...]
+      e.g. DIR = runs/data/lce2-test (gen-lce --count 200 --seed 4 --scale 2) and runs/data/kc-out
+      (gen-lce --count 100 --seed 7101 --scale 2 --outliers 0.2)"""
+import collections, glob, itertools, json, sys, urllib.request
+
+port_a, port_b, dirs = sys.argv[1], sys.argv[2], sys.argv[3:]
+
+
+def post(port, body):
+    req = urllib.request.Request(f"http://127.0.0.1:{port}/v1/fit", data=json.dumps(body).encode(),
+                                 headers={"content-type": "application/json"})
+    return json.load(urllib.request.urlopen(req))
+
+
+def error(truth, labels):
+    ks, ts = sorted(set(labels)), sorted(set(truth))
+    count = collections.Counter(zip(labels, truth))
+    best = max(sum(count[(a, b)] for a, b in zip(ks, perm) if b is not None)
+               for perm in itertools.permutations(ts + [None] * max(0, len(ks) - len(ts)), len(ks)))
+    return 1 - best / len(truth)
+
+
+same = n = 0
+errors = [0.0, 0.0]
+for path in sorted(p for d in dirs for p in glob.glob(f"{d}/*.json")):
+    s = json.load(open(path))
+    truth = [l if l > 0 else -1 for l in s["labels"]]
+    for given in ({}, {"k": s["num_models"]}):
+        body = {"kind": "points2d", "points": s["points"], **given}
+        answers = [post(port, body)["labels"] for port in (port_a, port_b)]
+        same += answers[0] == answers[1]
+        n += 1
+        for i, labels in enumerate(answers):
+            errors[i] += error(truth, [max(l, -1) for l in labels])
+print(f"labels the same in {same} of {n} fits; mean error {100 * errors[0] / n:.2f} % "
+      f"({port_a}) and {100 * errors[1] / n:.2f} % ({port_b})")
