@@ -202,14 +202,6 @@ pub fn circle_model(c: [f64; 3]) -> Model {
 /// An ellipse: centre, semi-axes a ≥ b > 0, θ the angle of the a-axis from +x.
 pub type EllipseParams = [f64; 5];
 
-/// The foot of the perpendicular from (u, v) to the ellipse x²/a² + y²/b² = 1 (a ≥ b > 0,
-/// ellipse frame): returns (cos φ, sin φ) of the foot (a cos φ, b sin φ).
-#[cfg(test)]
-fn foot_point(a: f64, b: f64, u: f64, v: f64) -> (f64, f64) {
-    let (c, s) = foot_first_quadrant(a, b, u.abs(), v.abs());
-    (c.copysign(u), s.copysign(v))
-}
-
 /// Newton steps on g(φ) from a foot known to be close (the previous evaluation's, while
 /// Levenberg–Marquardt moves the ellipse a little), in the first quadrant: the foot once a step
 /// moves it by less than 1e-12 rad, or `None` (not converged in [`WARM_STEPS`], or a step
@@ -240,7 +232,8 @@ fn foot_from(a: f64, b: f64, px: f64, py: f64, start: (f64, f64)) -> Option<(f64
 /// Most Newton steps of a warm-started foot ([`foot_from`]).
 const WARM_STEPS: usize = 4;
 
-/// [`foot_point`] for a point in the first quadrant (px, py ≥ 0).
+/// The foot of the perpendicular from (px, py) (first quadrant: px, py ≥ 0) to the ellipse
+/// x²/a² + y²/b² = 1 (a ≥ b > 0, ellipse frame): (cos φ, sin φ) of the foot (a cos φ, b sin φ).
 fn foot_first_quadrant(a: f64, b: f64, px: f64, py: f64) -> (f64, f64) {
     let c2 = a * a - b * b;
     // Near the curve (Sampson distance below a quarter of the smallest radius of curvature,
@@ -561,7 +554,7 @@ impl Estimator for EllipseEstimator {
         let problem = EllipseProblem {
             points: points.iter().map(|p| t.apply(*p)).collect(),
             weights: weights.to_vec(),
-            feet: std::cell::RefCell::new((false, vec![None; points.len()])),
+            feet: std::cell::RefCell::new(Feet::new(points.len())),
         };
         let start = [
             t.k * (e[0] - t.mx),
@@ -622,9 +615,25 @@ impl Estimator for EllipseEstimator {
 struct EllipseProblem {
     points: Vec<[f64; 2]>,
     weights: Vec<f64>,
-    /// Each point's foot at the last evaluation (first quadrant of the frame, `None` before
-    /// the first), the start of the next one's search; reset when the frame swaps its axes.
-    feet: std::cell::RefCell<(bool, Vec<Option<(f64, f64)>>)>,
+    /// Each point's foot at the last evaluation, the start of the next one's search.
+    feet: std::cell::RefCell<Feet>,
+}
+
+/// The feet of an [`EllipseProblem`]'s points at its last evaluation: (cos φ, sin φ) in the
+/// first quadrant of the frame, `None` before the first; reset when the frame swaps its axes.
+#[derive(Debug, Clone, Default)]
+struct Feet {
+    swapped: bool,
+    at: Vec<Option<(f64, f64)>>,
+}
+
+impl Feet {
+    fn new(n: usize) -> Self {
+        Self {
+            swapped: false,
+            at: vec![None; n],
+        }
+    }
 }
 
 impl LeastSquares for EllipseProblem {
@@ -636,12 +645,16 @@ impl LeastSquares for EllipseProblem {
         let frame = EllipseFrame::new(s)?;
         let (mut a, mut g, mut cost) = (vec![0.0; 25], vec![0.0; 5], 0.0);
         let mut feet = self.feet.borrow_mut();
-        let (swapped, feet) = &mut *feet;
-        if *swapped != frame.swapped {
-            *swapped = frame.swapped;
-            feet.iter_mut().for_each(|f| *f = None);
+        if feet.swapped != frame.swapped {
+            feet.swapped = frame.swapped;
+            feet.at.iter_mut().for_each(|f| *f = None);
         }
-        for ((p, &w), foot) in self.points.iter().zip(&self.weights).zip(feet.iter_mut()) {
+        for ((p, &w), foot) in self
+            .points
+            .iter()
+            .zip(&self.weights)
+            .zip(feet.at.iter_mut())
+        {
             if w <= 0.0 {
                 continue;
             }
@@ -732,12 +745,12 @@ mod tests {
         let problem = |rows: &[Vec<f64>]| EllipseProblem {
             points: rows.iter().map(|r| [r[0], r[1]]).collect(),
             weights: vec![1.0; rows.len()],
-            feet: std::cell::RefCell::new((false, vec![None; rows.len()])),
+            feet: std::cell::RefCell::new(Feet::new(rows.len())),
         };
         let warm = problem(&rows);
         let start = [0.25, -0.15, 2.1, 0.95, 0.45];
         let end = minimise(&warm, start, REFINE_EVALUATIONS).unwrap().state;
-        assert!(warm.feet.borrow().1.iter().all(Option::is_some));
+        assert!(warm.feet.borrow().at.iter().all(Option::is_some));
         let swapped = [end[0], end[1], end[3], end[2], end[4] + FRAC_PI_2];
         for state in [end, swapped, start] {
             let (c1, a1, g1) = warm.normal_equations(&state).unwrap();
