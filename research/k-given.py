@@ -11,25 +11,17 @@ running server.
 REFINE=0 in the environment fits without refinement; K=auto sends no k (the card's selection
 chooses K), and "k kept" then counts answers whose k is the number of structures.
 research/k-given-loo.sh runs it on each fold model of a cv run."""
-import collections, glob, itertools, json, os, sys, urllib.request
+import glob, json, os, sys
+
+import fitting
+from fitting import error
 
 port, what = sys.argv[1], sys.argv[2]
 only = sys.argv[3] if len(sys.argv) > 3 else None
 
 
 def post(body):
-    req = urllib.request.Request(f"http://127.0.0.1:{port}/v1/fit", data=json.dumps(body).encode(),
-                                 headers={"content-type": "application/json"})
-    return json.load(urllib.request.urlopen(req))
-
-
-def error(truth, labels):
-    """Share of points outside the best one-to-one matching of answer groups to true groups."""
-    ks, ts = sorted(set(labels)), sorted(set(truth))
-    count = collections.Counter(zip(labels, truth))
-    best = max(sum(count[(a, b)] for a, b in zip(ks, perm) if b is not None)
-               for perm in itertools.permutations(ts + [None] * max(0, len(ks) - len(ts)), len(ks)))
-    return 1 - best / len(truth)
+    return fitting.post(port, body)
 
 
 def requests():

@@ -6,25 +6,11 @@ error (outliers, -1, as a group of their own). For a change that should not move
   python3 research/same-answers.py PORT_A PORT_B DIR [DIR ...]
       e.g. DIR = runs/data/lce2-test (gen-lce --count 200 --seed 4 --scale 2) and runs/data/kc-out
       (gen-lce --count 100 --seed 7101 --scale 2 --outliers 0.2)"""
-import collections, glob, itertools, json, sys, urllib.request
+import glob, json, sys
+
+from fitting import error, post
 
 port_a, port_b, dirs = sys.argv[1], sys.argv[2], sys.argv[3:]
-
-
-def post(port, body):
-    req = urllib.request.Request(f"http://127.0.0.1:{port}/v1/fit", data=json.dumps(body).encode(),
-                                 headers={"content-type": "application/json"})
-    return json.load(urllib.request.urlopen(req))
-
-
-def error(truth, labels):
-    ks, ts = sorted(set(labels)), sorted(set(truth))
-    count = collections.Counter(zip(labels, truth))
-    best = max(sum(count[(a, b)] for a, b in zip(ks, perm) if b is not None)
-               for perm in itertools.permutations(ts + [None] * max(0, len(ks) - len(ts)), len(ks)))
-    return 1 - best / len(truth)
-
-
 same = n = 0
 errors = [0.0, 0.0]
 for path in sorted(p for d in dirs for p in glob.glob(f"{d}/*.json")):

@@ -1,0 +1,19 @@
+"""What the scripts that fit against a running server share (imported, not run): one POST to
+/v1/fit, and the error of an answer under the best one-to-one matching of groups."""
+import collections, itertools, json, urllib.request
+
+
+def post(port, body):
+    """The answer of a server on 127.0.0.1:`port` to the fit request `body`."""
+    req = urllib.request.Request(f"http://127.0.0.1:{port}/v1/fit", data=json.dumps(body).encode(),
+                                 headers={"content-type": "application/json"})
+    return json.load(urllib.request.urlopen(req))
+
+
+def error(truth, labels):
+    """Share of points outside the best one-to-one matching of answer groups to true groups."""
+    ks, ts = sorted(set(labels)), sorted(set(truth))
+    count = collections.Counter(zip(labels, truth))
+    best = max(sum(count[(a, b)] for a, b in zip(ks, perm) if b is not None)
+               for perm in itertools.permutations(ts + [None] * max(0, len(ks) - len(ts)), len(ks)))
+    return 1 - best / len(truth)
