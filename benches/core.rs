@@ -380,6 +380,7 @@ fn main() {
                 residuals: &residuals,
                 scores: &residuals,
                 k: 4,
+                clustered_k: 4,
                 selection: "sod",
             }));
         });

@@ -114,6 +114,7 @@ fn fit_response_fields_match_the_schema() {
         },
         labels: vec![0, 1],
         k: 2,
+        clustered_k: 2,
         selection: "sod".into(),
         residuals: vec![Residual { k: 1, r: 1.0 }],
         scores: vec![KScore { k: 2, score: 0.5 }],

@@ -447,12 +447,15 @@ fn a_chosen_k_counts_the_structures_and_the_outliers_are_answered_apart() {
         let n = f["points"].as_array().unwrap().len();
         assert_eq!(check_fit(&v, n) as u64, structures, "{file}");
         assert!(v["outliers"].as_u64().unwrap() > 0, "{file}");
+        // The clustering chose the structures and the outlier group.
+        assert_eq!(v["clustered_k"].as_u64(), Some(structures + 1), "{file}");
         let error = error_rate(&truth(&f), &labels(&v));
         assert!(error < 0.05, "{file}: {error}");
         // With "outliers": false the outlier group stays one of the chosen groups.
         let r = server.post_json("/v1/fit", &fit_body(&f, json!({"outliers": false})));
         let v = r.json();
         assert_eq!(v["k"].as_u64(), Some(structures + 1), "{file}");
+        assert_eq!(v["clustered_k"], v["k"], "{file}");
         assert_eq!(v["outliers"].as_u64(), Some(0), "{file}");
     }
 }

@@ -52,6 +52,7 @@ pub fn svg(points: &PointSet, image_size: Option<ImageSize>, fit: &FitResponse) 
         residuals: &residuals,
         scores: &scores,
         k: fit.k,
+        clustered_k: fit.clustered_k,
         selection: &fit.selection,
     })
 }

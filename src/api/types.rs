@@ -521,6 +521,9 @@ pub struct FitResponse {
     pub labels: Vec<i64>,
     /// Structures, not counting outliers.
     pub k: usize,
+    /// The K of the learned clustering the answer comes from (the K chosen, or given; with a
+    /// k given to a model that learned an outlier group, k + 1 when that answer was kept).
+    pub clustered_k: usize,
     pub selection: String,
     pub residuals: Vec<Residual>,
     pub scores: Vec<KScore>,
@@ -542,6 +545,7 @@ impl FitResponse {
             selection,
             residuals,
             scores,
+            k: clustered_k,
             ..
         } = outcome.clustering;
         let k = outcome.k;
@@ -560,6 +564,7 @@ impl FitResponse {
             outliers: outcome.labels.iter().filter(|&&l| l < 0).count(),
             labels: outcome.labels,
             k,
+            clustered_k,
             selection: selection.name().to_string(),
             residuals: residuals
                 .into_iter()

@@ -288,7 +288,11 @@ fn charts(p: &Picture) -> Vec<KChart> {
 
 /// Draws `charts` into `rects`, over one K axis, the chosen K marked.
 fn draw_charts(svg: &mut Svg, p: &Picture, charts: &[KChart], rects: &[Rect]) {
-    let caption = format!("K = {}", p.k);
+    let caption = if p.clustered_k == p.k {
+        format!("K = {}", p.k)
+    } else {
+        format!("K = {} clustered", p.clustered_k)
+    };
     let ks = p.residuals.iter().chain(p.scores).map(|&(k, _)| k as f64);
     let span = ks.fold(None, |acc: Option<(f64, f64)>, k| {
         Some(acc.map_or((k, k), |(a, b)| (a.min(k), b.max(k))))
@@ -308,7 +312,7 @@ fn draw_charts(svg: &mut Svg, p: &Picture, charts: &[KChart], rects: &[Rect]) {
                 integer_x: true,
                 y_from_zero: c.from_zero,
                 dots: true,
-                mark: Some((p.k as f64, &caption)),
+                mark: Some((p.clustered_k as f64, &caption)),
                 x_label: "K",
                 x_span: span,
                 title_size: 13.0,

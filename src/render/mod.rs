@@ -53,6 +53,10 @@ pub struct Picture<'a> {
     pub scores: &'a [(usize, f64)],
     /// The K of the answer.
     pub k: usize,
+    /// The K of the learned clustering the answer comes from, marked on the residual and score
+    /// charts: the answer's K unless refinement merged or added structures, or an outlier
+    /// group was answered -1.
+    pub clustered_k: usize,
     /// How K was chosen: `"sod"`, `"silhouette"` or `"fixed"`.
     pub selection: &'a str,
 }

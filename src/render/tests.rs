@@ -248,6 +248,7 @@ fn picture<'a>(
         residuals: &RESIDUALS,
         scores: &SCORES,
         k,
+        clustered_k: k,
         selection: "sod",
     }
 }
@@ -385,6 +386,24 @@ fn title_and_legend_name_the_model_k_types_and_counts() {
         "10 points in each structure"
     );
     assert!(svg.contains(">residual r(K)</text>") && svg.contains(">SOD score per K</text>"));
+    // The charts mark the K clustered; where the answer has another (an outlier group answered
+    // -1, structures merged), the mark says so and the legend keeps the answer's.
+    assert!(svg.contains(">K = 3</text>") && !svg.contains("clustered"));
+    let wider = Picture {
+        clustered_k: 4,
+        ..picture(&points, &labels, &refs, 3)
+    };
+    let svg = fit_svg(&wider);
+    assert!(svg.contains(">K = 4 clustered</text>"), "chart mark");
+    assert!(legend_k(&svg, 3), "legend");
+}
+
+/// Whether the legend names K = `k`.
+fn legend_k(svg: &str, k: usize) -> bool {
+    svg.split(r#"<g class="legend">"#)
+        .nth(1)
+        .and_then(|l| l.split("</g>").next())
+        .is_some_and(|l| l.contains(&format!(">K = {k}</text>")))
 }
 
 #[test]

@@ -108,6 +108,7 @@ pub fn write(
             residuals: &fit.clustering.residuals,
             scores: &fit.clustering.scores,
             k: fit.k,
+            clustered_k: fit.clustering.k,
             selection: selection.name(),
         });
         let file = format!("{:03}-{}.svg", rank + 1, file_stem(&sample.name));
