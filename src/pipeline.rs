@@ -467,21 +467,21 @@ fn fit_counting(
             let k = refined.structures.len();
             (refined.labels, refined.structures, k)
         }
-        None if outlier_group => match given {
+        None if outlier_group => match params.selection() {
             // Given k: the k + 1 clustering, where the outliers have a group of their own.
-            Some(k) if k < read => {
-                match outlier_group_apart(model, points, &embedding, params, k)? {
+            Selection::Fixed(_) => match given.filter(|&k| k < read) {
+                Some(k) => match outlier_group_apart(model, points, &embedding, params, k)? {
                     Some((wider, labels)) => {
                         let k = wider.k - 1;
                         clustering = both_ks(&clustering, wider);
                         (labels, Vec::new(), k)
                     }
                     None => unchanged(&clustering),
-                }
-            }
-            Some(_) => unchanged(&clustering),
+                },
+                None => unchanged(&clustering),
+            },
             // K chosen: the outliers' group is among the chosen K, and is not a structure.
-            None => match the_outlier_group(model, points, &clustering) {
+            _ => match the_outlier_group(model, points, &clustering) {
                 Some(out) => (
                     without_group(&clustering.labels, out),
                     Vec::new(),
@@ -1031,15 +1031,7 @@ const MIN_IMAGE_SPAN: f64 = 0.1;
 /// points use the image.
 fn image_barely_used(points: &PointSet, image: Option<ImageSize>) -> Option<String> {
     let image = image.filter(|_| points.kind() != Kind::Points2d)?;
-    let mut bounds = [[f64::INFINITY, f64::NEG_INFINITY]; 2];
-    for i in 0..points.len() {
-        for (c, &v) in points.row(i).iter().enumerate() {
-            let b = &mut bounds[c % 2];
-            b[0] = b[0].min(v);
-            b[1] = b[1].max(v);
-        }
-    }
-    let span = bounds.iter().map(|[lo, hi]| hi - lo).fold(0.0, f64::max);
+    let span = points.extent();
     let side = image.width.max(image.height);
     (span < MIN_IMAGE_SPAN * side).then(|| {
         format!(

@@ -134,6 +134,9 @@ fn fill_unseen(
                         .and_then(|v| v.get(track))
                         .and_then(|t| t.get(frame))
                         .is_some_and(|f| !f.0);
+                    if unseen && kind == Kind::Trajectories {
+                        return Ok(0.0);
+                    }
                     let message = if kind != Kind::Trajectories {
                         format!("{field}[{r}][{c}] is null: coordinates are numbers")
                     } else {
@@ -143,11 +146,7 @@ fn fill_unseen(
                              {track}, frame {frame}"
                         )
                     };
-                    if unseen && kind == Kind::Trajectories {
-                        Ok(0.0)
-                    } else {
-                        Err(ApiError::new(ErrorCode::InvalidRequest, message))
-                    }
+                    Err(ApiError::new(ErrorCode::InvalidRequest, message))
                 })
                 .collect()
         })

@@ -235,6 +235,11 @@ impl PointSet {
     pub fn values(&self) -> &[f64] {
         &self.values
     }
+    /// The longer side of the bounding box of every (x, y) pair (over every view or frame):
+    /// what [`Normalization::ImageFrame`] scales by when no image size is given.
+    pub fn extent(&self) -> f64 {
+        2.0 * bounding_frame(&self.values).2
+    }
     pub fn row(&self, i: usize) -> &[f64] {
         &self.values[i * self.dim..(i + 1) * self.dim]
     }

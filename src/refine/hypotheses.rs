@@ -179,7 +179,7 @@ fn propose(
     let anchors = ANCHORS.min(rows.len());
     let hood_of = |a: usize| neighbourhood(points, rows, rows[a * rows.len() / anchors], size);
     let hoods: Vec<Vec<usize>> = threads.map_n(anchors, hood_of);
-    let grown: Option<Vec<Option<Model>>> = (threads.count() > 1).then(|| {
+    let mut grown: Option<Vec<Option<Model>>> = (threads.count() > 1).then(|| {
         threads.map_n(anchors * types.len(), |j| {
             let (a, t) = (j / types.len(), j % types.len());
             grow(points, rows, types[t], &hoods[a], threshold)
@@ -197,8 +197,8 @@ fn propose(
             if known {
                 continue;
             }
-            let model = match &grown {
-                Some(grown) => grown[a * types.len() + t].clone(),
+            let model = match &mut grown {
+                Some(grown) => grown[a * types.len() + t].take(),
                 None => grow(points, rows, name, hood, threshold),
             };
             out.extend(model);
