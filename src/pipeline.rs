@@ -20,6 +20,7 @@
 //! 6. **answer** ([`FitOutcome`]): labels, K, structures, the residual curve and the stage
 //!    timings.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::ops::RangeInclusive;
 use std::time::Instant;
@@ -164,6 +165,8 @@ pub fn prepare(
     image: Option<ImageSize>,
 ) -> Result<Vec<f32>, FitError> {
     check(model, points)?;
+    let (points, image) = in_first_frame(points, image);
+    let points = points.as_ref();
     let card = &model.card;
     let resampled;
     let read = if read_as_sent(model, points) {
@@ -178,6 +181,21 @@ pub fn prepare(
         image,
         card.architecture.neighbors,
     ))
+}
+
+/// Stage 1 for pairs of images of two sizes: the second view carried into the first image's
+/// frame ([`ImageSize::in_first_frame`]), so that the network reads both views in one frame.
+fn in_first_frame(
+    points: &PointSet,
+    image: Option<ImageSize>,
+) -> (Cow<'_, PointSet>, Option<ImageSize>) {
+    match image {
+        Some(size) => {
+            let (points, size) = size.in_first_frame(points);
+            (points, Some(size))
+        }
+        None => (Cow::Borrowed(points), None),
+    }
 }
 
 /// How the network reads a set (stage 1).
@@ -268,7 +286,8 @@ pub fn embed(
     seed: u64,
 ) -> Result<Embedding, FitError> {
     check(model, points)?;
-    let mut windows = frames_read(model, points);
+    let (points, image) = in_first_frame(points, image);
+    let mut windows = frames_read(model, &points);
     let ReadPlan { thinned, sparse } = read_plan(model, &windows[0], image, seed);
     let (rows, owner) = thinned.unzip();
     // The windows side by side on the model's threads (each one's neighbour searches run on
@@ -399,7 +418,21 @@ pub fn fit(
     image: Option<ImageSize>,
     options: &FitOptions,
 ) -> Result<FitOutcome, FitError> {
-    fit_counting(model, points, image, options, "points")
+    // Two images of two sizes: the fit runs with the second view in the first image's frame
+    // (where the network reads it, and where refinement weighs both views' pixels alike), and
+    // the structures come back in each image's own pixels.
+    let moved = image
+        .filter(|_| points.kind() == Kind::Correspondences)
+        .and_then(|size| Some((size, size.second_view_move()?)));
+    let Some((size, (scale, shift))) = moved else {
+        return fit_counting(model, points, image, options, "points");
+    };
+    let (moved, first) = size.in_first_frame(points);
+    let mut outcome = fit_counting(model, &moved, Some(first), options, "points")?;
+    for s in &mut outcome.structures {
+        s.model = s.model.second_view_unmoved(scale, shift);
+    }
+    Ok(outcome)
 }
 
 /// [`fit`], its warnings naming the rows of `points` as `rows` ("points", or the tracks seen
@@ -1031,6 +1064,8 @@ const MIN_IMAGE_SPAN: f64 = 0.1;
 /// points use the image.
 fn image_barely_used(points: &PointSet, image: Option<ImageSize>) -> Option<String> {
     let image = image.filter(|_| points.kind() != Kind::Points2d)?;
+    // Two images of two sizes: the span of both views in the first image's frame.
+    let (points, image) = image.in_first_frame(points);
     let span = points.extent();
     let side = image.width.max(image.height);
     (span < MIN_IMAGE_SPAN * side).then(|| {
@@ -1091,7 +1126,7 @@ fn observed(
             .zip(sizes.iter().max())
             .map(|(&a, &b)| [a, b]),
         frames: (points.kind() == Kind::Trajectories).then(|| points.dim() / 2),
-        image_side: image.map(|s| s.width.max(s.height)),
+        image_side: image.map(|s| s.side()),
         outlier_ratio: flags_outliers.then(|| outliers as f64 / points.len().max(1) as f64),
     }
 }

@@ -366,6 +366,82 @@ fn fits_real_adelaide_pairs_with_each_model() {
 }
 
 #[test]
+fn a_second_image_of_another_size_answers_as_one_camera_would() {
+    // bonython's second view as a camera of twice the resolution would see it, each image's
+    // size sent: the same labels as the pair sent as is, and homographies into the second
+    // image's own pixels.
+    let server = Server::start(&[]);
+    let f = dataset("adelaidermf/bonython.json");
+    let (w, h) = (
+        f["image_size"][0].as_f64().unwrap(),
+        f["image_size"][1].as_f64().unwrap(),
+    );
+    let rows: Vec<Vec<f64>> = f["points"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| {
+            r.as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect()
+        })
+        .collect();
+    let doubled: Vec<Vec<f64>> = rows
+        .iter()
+        .map(|r| vec![r[0], r[1], 2.0 * r[2], 2.0 * r[3]])
+        .collect();
+    let extra = json!({"model": "adelaide-homography", "k": f["num_models"]});
+    let one = server
+        .post_json("/v1/fit", &fit_body(&f, extra.clone()))
+        .json();
+    let mut body = fit_body(&f, extra);
+    body["points"] = json!(doubled);
+    body["image_size"] = json!([[w, h], [2.0 * w, 2.0 * h]]);
+    let r = server.post_json("/v1/fit", &body);
+    assert_eq!(r.status, 200, "{}", r.text());
+    let two = r.json();
+    assert_eq!(labels(&two), labels(&one));
+    let structures = two["structures"].as_array().unwrap();
+    assert!(!structures.is_empty());
+    for s in structures {
+        let m: Vec<f64> = (0..9)
+            .map(|i| s["params"]["h"][i].as_f64().unwrap())
+            .collect();
+        let label = s["label"].as_i64().unwrap();
+        let mut d: Vec<f64> = labels(&two)
+            .iter()
+            .zip(&doubled)
+            .filter(|(l, _)| **l as i64 == label)
+            .map(|(_, p)| {
+                let z = m[6] * p[0] + m[7] * p[1] + m[8];
+                let u = (m[0] * p[0] + m[1] * p[1] + m[2]) / z;
+                let v = (m[3] * p[0] + m[4] * p[1] + m[5]) / z;
+                ((u - p[2]).powi(2) + (v - p[3]).powi(2)).sqrt()
+            })
+            .collect();
+        d.sort_by(f64::total_cmp);
+        // Within a few pixels of the doubled second image (twice the first's 1-2 px).
+        let median = d[d.len() / 2];
+        assert!(
+            median < 8.0,
+            "median transfer {median} px in the second image"
+        );
+    }
+    // A second size for tracks is refused: they come from one camera.
+    let tracks = json!({"kind": "trajectories", "points": [[0, 0, 1, 1, 2, 2], [5, 5, 6, 6, 7, 7],
+                        [9, 1, 8, 2, 7, 3]], "image_size": [[640, 480], [320, 240]]});
+    let r = server.post_json("/v1/fit", &tracks);
+    assert_eq!(r.status, 422, "{}", r.text());
+    assert!(
+        r.text().contains("only for correspondences"),
+        "{}",
+        r.text()
+    );
+}
+
+#[test]
 fn a_k_given_counts_the_structures_and_the_outliers_are_answered_apart() {
     // AdelaideRMF pairs with gross outliers, k = the number of structures: the networks learned
     // the outliers as a group of their own, and the answer still has k structures, outliers -1.

@@ -299,6 +299,12 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
             E::InvalidPoints,
         ),
         (
+            "second image size 0",
+            json!({"kind": "correspondences", "points": [[0, 0, 1, 1], [2, 2, 3, 3], [4, 5, 6, 7]],
+                   "image_size": [[640, 480], [0, 240]]}),
+            E::InvalidPoints,
+        ),
+        (
             "odd track rows",
             json!({"kind": "trajectories", "points": [[0, 0, 1], [1, 1, 2]]}),
             E::InvalidPoints,
@@ -452,7 +458,27 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
         (
             "image_size of three numbers",
             json!({"kind": "points2d", "points": two, "image_size": [1, 2, 3]}),
-            "image_size must be [width, height] in pixels, got 3 numbers",
+            "image_size must be [width, height] in pixels, or for correspondences \
+             [[width, height], [width, height]], one per image; got 3 numbers",
+        ),
+        (
+            "image_size of a word",
+            json!({"kind": "points2d", "points": two, "image_size": [640, "wide"]}),
+            "image_size must be [width, height] in pixels, or for correspondences \
+             [[width, height], [width, height]], one per image; got [640,\"wide\"]",
+        ),
+        (
+            "image_size per view for points",
+            json!({"kind": "points2d", "points": two, "image_size": [[640, 480], [320, 240]]}),
+            "image_size has one [width, height] per image only for correspondences; \
+             points2d come from one image",
+        ),
+        (
+            "image_size per view of three numbers",
+            json!({"kind": "correspondences", "points": [[0, 0, 1, 1], [2, 2, 3, 3], [4, 5, 6, 7]],
+                   "image_size": [[640, 480, 1], [320, 240]]}),
+            "image_size must be [width, height] in pixels, or for correspondences \
+             [[width, height], [width, height]], one per image; got a pair",
         ),
         (
             "an array for a body",

@@ -33,9 +33,10 @@ pub struct FitRequest {
     pub trajectory_matrix: Option<Vec<Vec<Coord>>>,
     #[serde(default)]
     pub model: Option<String>,
-    /// `[width, height]`; its length is checked with the other fields, with a clear message.
+    /// `[width, height]`, or `[[width, height], [width, height]]` for a correspondence's two
+    /// images; its shape is checked with the other fields, with a clear message.
     #[serde(default)]
-    pub image_size: Option<Vec<f64>>,
+    pub image_size: Option<serde_json::Value>,
     #[serde(default)]
     pub k: Option<usize>,
     #[serde(default)]
@@ -230,6 +231,50 @@ pub fn default_model(
         .or_else(|| of_kind.next())
 }
 
+/// `image_size` as sent: `[width, height]`, or for correspondences one such pair per image.
+fn image_size(value: &serde_json::Value, kind: Kind) -> Result<ImageSize, ApiError> {
+    let pair = |v: &serde_json::Value| -> Option<[f64; 2]> {
+        match v.as_array()?.as_slice() {
+            [w, h] => Some([w.as_f64()?, h.as_f64()?]),
+            _ => None,
+        }
+    };
+    let shape = |found: String| {
+        ApiError::new(
+            ErrorCode::InvalidRequest,
+            format!(
+                "image_size must be [width, height] in pixels, or for correspondences \
+                 [[width, height], [width, height]], one per image; got {found}"
+            ),
+        )
+    };
+    if let Some([w, h]) = pair(value) {
+        return Ok(ImageSize::new(w, h)?);
+    }
+    match value.as_array().map(Vec::as_slice) {
+        Some([a, b]) if a.is_array() || b.is_array() => match (pair(a), pair(b)) {
+            (Some(first), Some(second)) if kind == Kind::Correspondences => {
+                Ok(ImageSize::per_view(first, second)?)
+            }
+            (Some(_), Some(_)) => Err(ApiError::new(
+                ErrorCode::InvalidRequest,
+                format!(
+                    "image_size has one [width, height] per image only for correspondences; \
+                     {kind} come from one image: give [width, height]"
+                ),
+            )),
+            _ => Err(shape("a pair that is not two [width, height] pairs".into())),
+        },
+        Some(items) if items.iter().all(serde_json::Value::is_number) => {
+            Err(shape(format!("{} numbers", items.len())))
+        }
+        _ => {
+            let text = value.to_string();
+            Err(shape(text.chars().take(60).collect()))
+        }
+    }
+}
+
 impl FitRequest {
     /// Checks every field against the limits and the chosen model.
     pub fn validate(
@@ -276,6 +321,11 @@ impl FitRequest {
                 PointSet::from_trajectory_matrix(&matrix)?
             }
         };
+        let image_size = self
+            .image_size
+            .as_ref()
+            .map(|v| image_size(v, kind))
+            .transpose()?;
         let model = match &self.model {
             Some(name) => models.get(name).ok_or_else(|| {
                 ApiError::new(
@@ -311,19 +361,6 @@ impl FitRequest {
                 ),
             ));
         }
-        let image_size = match self.image_size.as_deref() {
-            Some(&[w, h]) => Some(ImageSize::new(w, h)?),
-            Some(other) => {
-                return Err(ApiError::new(
-                    ErrorCode::InvalidRequest,
-                    format!(
-                        "image_size must be [width, height] in pixels, got {} numbers",
-                        other.len()
-                    ),
-                ));
-            }
-            None => None,
-        };
         let n = points.len();
         let k_max = self.k_max.unwrap_or(model.card.k_max);
         if k_max == 0 || k_max > limits.max_k_max {

@@ -1,5 +1,7 @@
 //! Validated point sets and the normalisation shared by training and serving.
 
+use std::borrow::Cow;
+
 use serde::{Deserialize, Serialize};
 
 /// The fewest points a set may have: k-means and every loss need at least two.
@@ -107,11 +109,15 @@ pub enum InputError {
     TooFewSeenThroughout { complete: usize },
 }
 
-/// Width and height of the image the pixel coordinates refer to.
+/// Width and height of the image the pixel coordinates refer to: of every view, or (`second`)
+/// of the first of a correspondence's two views when the second image has another size.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ImageSize {
     pub width: f64,
     pub height: f64,
+    /// The second view's `[width, height]`, where it differs from the first's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub second: Option<[f64; 2]>,
 }
 
 impl ImageSize {
@@ -119,12 +125,88 @@ impl ImageSize {
         // At least a pixel: dividing pixel coordinates by a tinier size overflows the network.
         let valid = |v: f64| (1.0..=MAX_ABS_COORD).contains(&v);
         if valid(width) && valid(height) {
-            Ok(Self { width, height })
+            Ok(Self {
+                width,
+                height,
+                second: None,
+            })
         } else {
             Err(InputError::BadImageSize {
                 w: width,
                 h: height,
             })
+        }
+    }
+
+    /// The sizes of a correspondence's two images, each checked as by [`ImageSize::new`]; one
+    /// size when they are equal.
+    pub fn per_view([w1, h1]: [f64; 2], [w2, h2]: [f64; 2]) -> Result<Self, InputError> {
+        let second = Self::new(w2, h2)?;
+        let mut first = Self::new(w1, h1)?;
+        if (w1, h1) != (w2, h2) {
+            first.second = Some([second.width, second.height]);
+        }
+        Ok(first)
+    }
+
+    /// `[width, height]` of view `v` (0 or 1; every view but a distinct second has the first's).
+    pub fn view(&self, v: usize) -> [f64; 2] {
+        match self.second {
+            Some(size) if v == 1 => size,
+            _ => [self.width, self.height],
+        }
+    }
+
+    /// The longer side of the smaller image.
+    pub fn side(&self) -> f64 {
+        let side = |[w, h]: [f64; 2]| w.max(h);
+        side(self.view(0)).min(side(self.view(1)))
+    }
+
+    /// The move x' = s·x + t that carries a distinct second image's pixels into the first
+    /// image's frame (centre to centre, longer side to longer side): `(s, t)`; `None` for one
+    /// size.
+    pub fn second_view_move(&self) -> Option<(f64, [f64; 2])> {
+        let [w2, h2] = self.second?;
+        let s = self.width.max(self.height) / w2.max(h2);
+        Some((
+            s,
+            [
+                self.width / 2.0 - s * w2 / 2.0,
+                self.height / 2.0 - s * h2 / 2.0,
+            ],
+        ))
+    }
+
+    /// `points` with a distinct second view's coordinates carried into the first image's frame
+    /// (its centre to the first's centre, its longer side to the first's longer side), and the
+    /// first image's size: the one frame the network, its symmetries and its neighbour
+    /// features read both views in. Unchanged for one size.
+    pub fn in_first_frame(self, points: &PointSet) -> (Cow<'_, PointSet>, ImageSize) {
+        let first = Self {
+            second: None,
+            ..self
+        };
+        let Some((scale, shift)) = self
+            .second_view_move()
+            .filter(|_| points.kind() == Kind::Correspondences)
+        else {
+            return (Cow::Borrowed(points), first);
+        };
+        let dim = points.dim();
+        let mut values = points.values().to_vec();
+        for row in values.chunks_exact_mut(dim) {
+            for (j, v) in row.iter_mut().enumerate() {
+                // Columns x1, y1, x2, y2: the second pair is the second view.
+                if (j / 2) % 2 == 1 {
+                    *v = *v * scale + shift[j % 2];
+                }
+            }
+        }
+        match PointSet::from_flat(points.kind(), dim, values) {
+            Ok(moved) => (Cow::Owned(moved), first),
+            // Out of the accepted range: read as sent.
+            Err(_) => (Cow::Borrowed(points), first),
         }
     }
 }
@@ -452,5 +534,50 @@ mod tests {
         // Without the image size the bounding box (0..640, 0..480) stands in for it.
         let w = Normalization::ImageFrame.apply(&set, None);
         assert_eq!(w, z);
+    }
+
+    #[test]
+    fn a_second_image_of_another_size_is_read_in_the_first_images_frame() {
+        let rows = [vec![0.0, 0.0, 640.0, 480.0], vec![320.0, 240.0, 100.0, 7.0]];
+        let set = PointSet::from_rows(Kind::Correspondences, &rows).unwrap();
+        let one = ImageSize::new(640.0, 480.0).unwrap();
+        // The second photo at twice the resolution: its pixels halved about the centres.
+        let doubled: Vec<Vec<f64>> = rows
+            .iter()
+            .map(|r| vec![r[0], r[1], 2.0 * r[2], 2.0 * r[3]])
+            .collect();
+        let big = PointSet::from_rows(Kind::Correspondences, &doubled).unwrap();
+        let two = ImageSize::per_view([640.0, 480.0], [1280.0, 960.0]).unwrap();
+        assert_eq!(two.view(1), [1280.0, 960.0]);
+        assert_eq!(two.side(), 640.0);
+        let (moved, first) = two.in_first_frame(&big);
+        assert_eq!(first, one);
+        assert_eq!(moved.values(), set.values());
+        // The same normalised input as the pair taken in one camera.
+        assert_eq!(
+            Normalization::ImageFrame.apply(&moved, Some(first)),
+            Normalization::ImageFrame.apply(&set, Some(one))
+        );
+        // A portrait second image: centre to centre, longer side to longer side.
+        let tall = ImageSize::per_view([640.0, 480.0], [480.0, 640.0]).unwrap();
+        let (moved, _) = tall.in_first_frame(&set);
+        assert_eq!(
+            moved.row(1),
+            &[320.0, 240.0, 100.0 - 240.0 + 320.0, 7.0 - 320.0 + 240.0]
+        );
+        // Equal sizes are one size, and one size moves nothing.
+        assert_eq!(
+            ImageSize::per_view([640.0, 480.0], [640.0, 480.0]).unwrap(),
+            one
+        );
+        let (same, _) = one.in_first_frame(&set);
+        assert!(matches!(same, Cow::Borrowed(_)));
+        // Each view's size is checked.
+        assert!(ImageSize::per_view([640.0, 480.0], [0.0, 480.0]).is_err());
+        assert!(ImageSize::per_view([640.0, f64::NAN], [640.0, 480.0]).is_err());
+        // Tracks come from one camera: a second size moves no frame.
+        let tracks = PointSet::from_rows(Kind::Trajectories, &doubled).unwrap();
+        let (kept, _) = two.in_first_frame(&tracks);
+        assert_eq!(kept.values(), tracks.values());
     }
 }

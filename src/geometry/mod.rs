@@ -113,6 +113,32 @@ pub enum Model {
 }
 
 impl Model {
+    /// The model of a correspondence fitted with its second view moved by x' = s·x + t, in the
+    /// second view's own coordinates x = (x' − t) / s, A = [[s, 0, tx], [0, s, ty], [0, 0, 1]]:
+    /// H = A⁻¹·H' and F = Aᵀ·F' (each in its gauge: ‖·‖ = 1, last entry positive), the affine
+    /// map's rows divided by s after t is taken off. Other models are of one view: unchanged.
+    pub fn second_view_unmoved(&self, s: f64, [tx, ty]: [f64; 2]) -> Model {
+        let a_inv: linalg::Mat3 = [1.0 / s, 0.0, -tx / s, 0.0, 1.0 / s, -ty / s, 0.0, 0.0, 1.0];
+        let a_t: linalg::Mat3 = [s, 0.0, 0.0, 0.0, s, 0.0, tx, ty, 1.0];
+        match self {
+            Model::Homography { h } => linalg::unit_norm_sign(&linalg::mat3_mul(&a_inv, h))
+                .map_or_else(|| self.clone(), |h| Model::Homography { h }),
+            Model::Fundamental { f } => linalg::unit_norm_sign(&linalg::mat3_mul(&a_t, f))
+                .map_or_else(|| self.clone(), |f| Model::Fundamental { f }),
+            Model::Affine { a } => Model::Affine {
+                a: [
+                    a[0] / s,
+                    a[1] / s,
+                    (a[2] - tx) / s,
+                    a[3] / s,
+                    a[4] / s,
+                    (a[5] - ty) / s,
+                ],
+            },
+            other => other.clone(),
+        }
+    }
+
     /// The wire name of the model's type (`"line"`, `"circle"`, ...).
     pub fn type_name(&self) -> &'static str {
         match self {
@@ -457,6 +483,74 @@ mod tests {
                 reason: "all points coincide".into(),
             },
         ]
+    }
+
+    #[test]
+    fn a_model_fitted_on_a_moved_second_view_fits_the_view_as_sent() {
+        // Correspondences of a known homography, affine map and epipolar geometry, their second
+        // view moved by x' = s·x + t before the fit: each model of the moved pairs, brought
+        // back, fits the pairs as sent.
+        let (s, t) = (0.5, [160.0, 120.0]);
+        let moved = |p: [f64; 4]| [p[0], p[1], s * p[2] + t[0], s * p[3] + t[1]];
+        let h = [1.1, 0.05, 12.0, -0.03, 0.95, -7.0, 2e-4, -1e-4, 1.0];
+        let a = [0.9, 0.1, 15.0, -0.2, 1.05, 4.0];
+        let pairs_of = |m: &[f64; 9]| -> Vec<[f64; 4]> {
+            (0..12)
+                .map(|i| {
+                    let (x, y) = (40.0 * (i % 4) as f64 + 50.0, 60.0 * (i / 4) as f64 + 30.0);
+                    let w = m[6] * x + m[7] * y + m[8];
+                    let u = (m[0] * x + m[1] * y + m[2]) / w;
+                    let v = (m[3] * x + m[4] * y + m[5]) / w;
+                    [x, y, u, v]
+                })
+                .collect()
+        };
+        let affine_h = [a[0], a[1], a[2], a[3], a[4], a[5], 0.0, 0.0, 1.0];
+        for (truth, pairs) in [
+            (Model::Homography { h }, pairs_of(&h)),
+            (Model::Affine { a }, pairs_of(&affine_h)),
+        ] {
+            let rows: Vec<Vec<f64>> = pairs.iter().map(|&p| moved(p).to_vec()).collect();
+            let refs: Vec<&[f64]> = rows.iter().map(Vec::as_slice).collect();
+            let fitted = fit_type(truth.type_name(), &refs).unwrap().model;
+            let back = fitted.second_view_unmoved(s, t);
+            for p in &pairs {
+                let r = back.residual(p);
+                assert!(r < 1e-6, "{}: {r}", truth.type_name());
+            }
+        }
+        // F' of the moved view, F = Aᵀ·F' of the view as sent: x₂ᵀ·F·x₁ = x₂'ᵀ·F'·x₁ = 0.
+        let f_moved = [0.0, -1e-3, 0.2, 1e-3, 0.0, -0.3, -0.2, 0.3, 0.0];
+        let back = Model::Fundamental { f: f_moved }.second_view_unmoved(s, t);
+        let Model::Fundamental { f } = back else {
+            panic!("not a fundamental matrix");
+        };
+        let norm = f.iter().map(|v| v * v).sum::<f64>().sqrt();
+        assert!((norm - 1.0).abs() < 1e-12);
+        // x₂ᵀ·F·x₁ is x₂'ᵀ·F'·x₁ up to F's gauge: one ratio for every pair.
+        let ratios: Vec<f64> = [(10.0, 20.0, 300.0, 40.0), (-5.0, 7.0, 12.0, 640.0)]
+            .into_iter()
+            .map(|(x, y, u, v)| {
+                let epi = |f: &[f64; 9], u: f64, v: f64| {
+                    u * (f[0] * x + f[1] * y + f[2])
+                        + v * (f[3] * x + f[4] * y + f[5])
+                        + (f[6] * x + f[7] * y + f[8])
+                };
+                epi(&f, u, v) / epi(&f_moved, s * u + t[0], s * v + t[1])
+            })
+            .collect();
+        assert!(ratios[0].is_finite() && ratios[0] != 0.0);
+        assert!(
+            (ratios[0] - ratios[1]).abs() < 1e-9 * ratios[0].abs(),
+            "{ratios:?}"
+        );
+        // Models of one view do not move.
+        let line = Model::Line {
+            a: 0.6,
+            b: 0.8,
+            c: -3.0,
+        };
+        assert_eq!(line.second_view_unmoved(s, t), line);
     }
 
     #[test]

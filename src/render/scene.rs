@@ -21,7 +21,10 @@ pub(super) fn bounds(points: &PointSet, image: Option<ImageSize>) -> Bounds {
     }
     if let (true, Some(size)) = (points.kind() != Kind::Points2d, image) {
         b.add(0.0, 0.0);
-        b.add(size.width, size.height);
+        for v in 0..2 {
+            let [w, h] = size.view(v);
+            b.add(w, h);
+        }
     }
     b
 }
@@ -58,9 +61,18 @@ pub(super) fn draw_points(
     groups: &BTreeMap<i64, Vec<usize>>,
 ) {
     let kind = points.kind();
-    if let (true, Some(size)) = (kind != Kind::Points2d, image) {
+    // One outline per image size (the second view's too, when it has its own).
+    let sizes = image
+        .filter(|_| kind != Kind::Points2d)
+        .map(|s| {
+            let mut sizes = vec![s.view(0)];
+            sizes.extend(s.second);
+            sizes
+        })
+        .unwrap_or_default();
+    for [w, h] in sizes {
         let (x0, y0) = frame.map(0.0, 0.0);
-        let (x1, y1) = frame.map(size.width, size.height);
+        let (x1, y1) = frame.map(w, h);
         svg.rect(
             Rect {
                 x: x0.min(x1),

@@ -151,6 +151,20 @@ pub fn evaluate_sample(
     sample: &Sample,
     s: &EvalSettings,
 ) -> Result<EvalRow, FitError> {
+    // Two images of two sizes: scored in the first image's frame, where a fit runs.
+    let moved;
+    let sample = match sample.image_size.filter(|size| size.second.is_some()) {
+        Some(size) => {
+            let (points, first) = size.in_first_frame(&sample.points);
+            moved = Sample {
+                points: points.into_owned(),
+                image_size: Some(first),
+                ..sample.clone()
+            };
+            &moved
+        }
+        None => sample,
+    };
     let z = pipeline::embed(
         model,
         &sample.points,

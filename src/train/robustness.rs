@@ -616,6 +616,29 @@ pub fn rescale(seq: &Sequence, factor: f64) -> Sequence {
     }
 }
 
+/// The second image taken at `factor` times the first's resolution: its coordinates and its
+/// size (sent per image) multiplied by `factor`, the first view's unchanged.
+pub fn rescale_second_view(seq: &Sequence, factor: f64) -> Sequence {
+    let dim = seq.points.dim();
+    let values: Vec<f64> = (seq.points.values().iter().enumerate())
+        .map(|(i, v)| {
+            if (i % dim) / 2 % 2 == 1 {
+                v * factor
+            } else {
+                *v
+            }
+        })
+        .collect();
+    Sequence {
+        points: PointSet::from_flat(seq.points.kind(), dim, values).expect("finite values"),
+        image_size: seq.image_size.map(|s| {
+            ImageSize::per_view([s.width, s.height], [s.width * factor, s.height * factor])
+                .expect("positive")
+        }),
+        ..seq.clone()
+    }
+}
+
 /// A sample named after its sequence and what was done to it.
 fn named(seq: &Sequence, what: &str) -> (String, Sample) {
     let mut sample = seq.sample();
@@ -635,23 +658,26 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
         "added outliers",
         "image scale",
         "image size sent",
+        "second image scale",
     ]
     .map(String::from)
     .to_vec();
     let source = format!("AdelaideRMF {model_type} pairs ({})", seqs.len());
-    // (name, points kept, added outliers, image scale, image size sent)
-    let specs: [(&str, f64, f64, f64, bool); 7] = [
-        ("as-is", 1.0, 0.0, 1.0, true),
-        ("subsample-50", 0.5, 0.0, 1.0, true),
-        ("subsample-25", 0.25, 0.0, 1.0, true),
-        ("outliers+20", 1.0, 0.2, 1.0, true),
-        ("rescale-0.5", 1.0, 0.0, 0.5, true),
-        ("rescale-2", 1.0, 0.0, 2.0, true),
-        ("no-image-size", 1.0, 0.0, 1.0, false),
+    // (name, points kept, added outliers, image scale, image size sent, second image scale)
+    let specs: [(&str, f64, f64, f64, bool, f64); 9] = [
+        ("as-is", 1.0, 0.0, 1.0, true, 1.0),
+        ("subsample-50", 0.5, 0.0, 1.0, true, 1.0),
+        ("subsample-25", 0.25, 0.0, 1.0, true, 1.0),
+        ("outliers+20", 1.0, 0.2, 1.0, true, 1.0),
+        ("rescale-0.5", 1.0, 0.0, 0.5, true, 1.0),
+        ("rescale-2", 1.0, 0.0, 2.0, true, 1.0),
+        ("no-image-size", 1.0, 0.0, 1.0, false, 1.0),
+        ("second-image-2", 1.0, 0.0, 1.0, true, 2.0),
+        ("second-image-0.5", 1.0, 0.0, 1.0, true, 0.5),
     ];
     let builders = specs
         .into_iter()
-        .map(|(name, keep, outliers, factor, image)| {
+        .map(|(name, keep, outliers, factor, image, second)| {
             let seqs = seqs.clone();
             let source = source.clone();
             let random = keep < 1.0 || outliers > 0.0;
@@ -660,10 +686,15 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
                 for seq in seqs.iter() {
                     if !random {
                         let mut changed = rescale(seq, factor);
+                        if second != 1.0 {
+                            changed = rescale_second_view(&changed, second);
+                        }
                         if !image {
                             changed.image_size = None;
                         }
-                        let what = if factor != 1.0 {
+                        let what = if second != 1.0 {
+                            format!("second image x{second}")
+                        } else if factor != 1.0 {
                             format!("x{factor}")
                         } else if !image {
                             "no image size".to_string()
@@ -705,6 +736,7 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
                         ("added outliers", json!(format!("{} %", 100.0 * outliers))),
                         ("image scale", json!(factor)),
                         ("image size sent", json!(image)),
+                        ("second image scale", json!(second)),
                     ]),
                     data,
                     samples,
@@ -717,6 +749,7 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
     let notes = vec![
         "Known K counts the gross outliers as one group (AdelaideRMF's label 0), so K is the number of structures plus one wherever a pair has outliers.".to_string(),
         "Rescaling multiplies the coordinates and the image size together; the image-frame normalisation divides one by the other, so those cells test that invariance (by a power of two it is exact in floating point).".to_string(),
+        "The second-image cells give the second view another resolution (a second camera) and send each image's size, [[w, h], [w2, h2]]: the network reads the second view in the first image's frame, and refinement fits in each image's own pixels.".to_string(),
     ];
     (columns, "as-is".into(), notes, builders)
 }
@@ -1013,6 +1046,27 @@ mod tests {
         let norm = crate::data::Normalization::ImageFrame;
         assert_eq!(
             norm.apply(&big.points, big.image_size),
+            norm.apply(&seq.points, seq.image_size)
+        );
+    }
+
+    #[test]
+    fn a_second_image_rescaled_keeps_the_first_view_and_sends_both_sizes() {
+        let seq = pair();
+        let second = rescale_second_view(&seq, 2.0);
+        let (a, b) = (seq.points.row(3), second.points.row(3));
+        assert_eq!(&b[..2], &a[..2]);
+        assert_eq!(&b[2..], &[2.0 * a[2], 2.0 * a[3]]);
+        let size = second.image_size.unwrap();
+        assert_eq!(
+            (size.view(0), size.view(1)),
+            ([640.0, 480.0], [1280.0, 960.0])
+        );
+        // Read in the first image's frame, the network sees the pair as sent in one camera.
+        let (moved, first) = size.in_first_frame(&second.points);
+        let norm = crate::data::Normalization::ImageFrame;
+        assert_eq!(
+            norm.apply(&moved, Some(first)),
             norm.apply(&seq.points, seq.image_size)
         );
     }
