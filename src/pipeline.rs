@@ -428,6 +428,10 @@ pub fn fit(
         return fit_counting(model, points, image, options, "points");
     };
     let (moved, first) = size.in_first_frame(points);
+    let Cow::Owned(moved) = moved else {
+        // Not moved (out of the accepted range; the API refuses such sizes): as sent.
+        return fit_counting(model, points, image, options, "points");
+    };
     let mut outcome = fit_counting(model, &moved, Some(first), options, "points")?;
     for s in &mut outcome.structures {
         s.model = s.model.second_view_unmoved(scale, shift);
@@ -1126,7 +1130,7 @@ fn observed(
             .zip(sizes.iter().max())
             .map(|(&a, &b)| [a, b]),
         frames: (points.kind() == Kind::Trajectories).then(|| points.dim() / 2),
-        image_side: image.map(|s| s.side()),
+        image_side: image.map(|s| s.width.max(s.height)),
         outlier_ratio: flags_outliers.then(|| outliers as f64 / points.len().max(1) as f64),
     }
 }

@@ -299,6 +299,12 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
             E::InvalidPoints,
         ),
         (
+            "second view past 1e9 in the first image's frame",
+            json!({"kind": "correspondences", "points": [[0, 0, 1, 1], [2, 2, 3, 3], [4, 5, 6, 7]],
+                   "image_size": [[1e9, 1e9], [1, 1]]}),
+            E::InvalidPoints,
+        ),
+        (
             "second image size 0",
             json!({"kind": "correspondences", "points": [[0, 0, 1, 1], [2, 2, 3, 3], [4, 5, 6, 7]],
                    "image_size": [[640, 480], [0, 240]]}),

@@ -1,5 +1,6 @@
 //! Wire types of the API and their parsing into validated domain values.
 
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -326,6 +327,15 @@ impl FitRequest {
             .as_ref()
             .map(|v| image_size(v, kind))
             .transpose()?;
+        if let Some(size) = image_size.filter(|s| s.second.is_some())
+            && matches!(size.in_first_frame(&points).0, Cow::Borrowed(_))
+        {
+            return Err(ApiError::new(
+                ErrorCode::InvalidPoints,
+                "the second image's coordinates, brought to the first image's scale by the two \
+                 image_size entries, pass 1e9: check image_size",
+            ));
+        }
         let model = match &self.model {
             Some(name) => models.get(name).ok_or_else(|| {
                 ApiError::new(

@@ -157,12 +157,6 @@ impl ImageSize {
         }
     }
 
-    /// The longer side of the smaller image.
-    pub fn side(&self) -> f64 {
-        let side = |[w, h]: [f64; 2]| w.max(h);
-        side(self.view(0)).min(side(self.view(1)))
-    }
-
     /// The move x' = s·x + t that carries a distinct second image's pixels into the first
     /// image's frame (centre to centre, longer side to longer side): `(s, t)`; `None` for one
     /// size.
@@ -549,7 +543,6 @@ mod tests {
         let big = PointSet::from_rows(Kind::Correspondences, &doubled).unwrap();
         let two = ImageSize::per_view([640.0, 480.0], [1280.0, 960.0]).unwrap();
         assert_eq!(two.view(1), [1280.0, 960.0]);
-        assert_eq!(two.side(), 640.0);
         let (moved, first) = two.in_first_frame(&big);
         assert_eq!(first, one);
         assert_eq!(moved.values(), set.values());
