@@ -150,9 +150,16 @@ fn subtitle(p: &Picture) -> String {
         ),
     };
     match p.image_size {
-        Some(s) if p.points.kind() != Kind::Points2d => {
-            format!("{what} · image {} × {}", human(s.width), human(s.height))
-        }
+        Some(s) if p.points.kind() != Kind::Points2d => match s.second {
+            Some([w2, h2]) => format!(
+                "{what} · images {} × {} and {} × {}",
+                human(s.width),
+                human(s.height),
+                human(w2),
+                human(h2)
+            ),
+            None => format!("{what} · image {} × {}", human(s.width), human(s.height)),
+        },
         _ => what,
     }
 }

@@ -312,6 +312,24 @@ fn every_kind_is_well_formed_with_one_mark_per_point() {
         .sum();
     assert_eq!(segments, 150, "a segment per correspondence");
     assert!(svg.contains(r#"class="image""#), "the image outline");
+    assert_eq!(svg.matches(r#"class="image""#).count(), 1);
+    assert!(
+        svg.contains("image 640 × 480"),
+        "the image size in the subtitle"
+    );
+    // Two cameras: an outline per image, both sizes named.
+    p.image_size = Some(ImageSize::per_view([640.0, 480.0], [1280.0, 960.0]).unwrap());
+    let svg = fit_svg(&p);
+    check_xml(&svg).unwrap();
+    assert_eq!(
+        svg.matches(r#"class="image""#).count(),
+        2,
+        "an outline per image"
+    );
+    assert!(
+        svg.contains("images 640 × 480 and 1280 × 960"),
+        "both sizes named"
+    );
 
     let (points, labels) = trajectories(90, 5);
     let svg = fit_svg(&picture(&points, &labels, &[], 2));
