@@ -424,18 +424,25 @@ pub fn fit(
     let moved = image
         .filter(|_| points.kind() == Kind::Correspondences)
         .and_then(|size| Some((size, size.second_view_move()?)));
+    let as_sent = || {
+        let mut outcome = fit_counting(model, points, image, options, "points")?;
+        outcome.warnings.extend(image_barely_used(points, image));
+        Ok(outcome)
+    };
     let Some((size, (scale, shift))) = moved else {
-        return fit_counting(model, points, image, options, "points");
+        return as_sent();
     };
     let (moved, first) = size.in_first_frame(points);
     let Cow::Owned(moved) = moved else {
         // Not moved (out of the accepted range; the API refuses such sizes): as sent.
-        return fit_counting(model, points, image, options, "points");
+        return as_sent();
     };
     let mut outcome = fit_counting(model, &moved, Some(first), options, "points")?;
     for s in &mut outcome.structures {
         s.model = s.model.second_view_unmoved(scale, shift);
     }
+    // Each image's span, in its own pixels.
+    outcome.warnings.extend(image_barely_used(points, image));
     Ok(outcome)
 }
 
@@ -544,7 +551,6 @@ fn fit_counting(
     if let Selection::Fixed(asked) = params.selection() {
         warnings.extend(fewer_than_asked(asked, k));
     }
-    warnings.extend(image_barely_used(points, image));
     Ok(FitOutcome {
         warnings,
         clustering,
@@ -600,6 +606,9 @@ pub fn fit_seen(
         options,
         "tracks seen in every frame",
     )?;
+    outcome
+        .warnings
+        .extend(image_barely_used(&throughout, image));
     let t0 = Instant::now();
     let motions = motions(&throughout, &outcome);
     let placing = Placing {
@@ -1051,8 +1060,13 @@ fn fewer_than_asked(asked: usize, answered: usize) -> Option<String> {
     } else {
         ("groups", "their")
     };
+    let structures = if answered == 1 {
+        "structure"
+    } else {
+        "structures"
+    };
     Some(format!(
-        "k = {asked} was given and refinement answers {answered} structures: {dropped} learned \
+        "k = {asked} was given and refinement answers {answered} {structures}: {dropped} learned \
          {noun} followed no model or lost most of {their} points to the others (\"refine\": \
          false answers the {asked} learned groups)"
     ))
@@ -1063,22 +1077,51 @@ fn fewer_than_asked(asked: usize, answered: usize) -> Option<String> {
 const MIN_IMAGE_SPAN: f64 = 0.1;
 
 /// The warning of pixel coordinates that span under [`MIN_IMAGE_SPAN`] of the `image` given
-/// (along x and along y, over every view or frame): most often an image size that is not the
-/// one the coordinates were measured in. `None` for points2d, without an image, or when the
-/// points use the image.
+/// (along x and along y, over every view or frame; for two images of two sizes, each view in
+/// its own image): most often an image size that is not the one the coordinates were measured
+/// in. `None` for points2d, without an image, or when the points use the image.
 fn image_barely_used(points: &PointSet, image: Option<ImageSize>) -> Option<String> {
     let image = image.filter(|_| points.kind() != Kind::Points2d)?;
-    // Two images of two sizes: the span of both views in the first image's frame.
-    let (points, image) = image.in_first_frame(points);
+    let check = "check that image_size is the size of the image the coordinates were measured in";
+    if image.second.is_some() && points.kind() == Kind::Correspondences {
+        let words: Vec<String> = (0..2)
+            .filter_map(|v| {
+                let span = view_extent(points, v);
+                let [w, h] = image.view(v);
+                let side = w.max(h);
+                (span < MIN_IMAGE_SPAN * side).then(|| {
+                    format!(
+                        "the points of image {} span {} px of its {side} px",
+                        v + 1,
+                        span.round()
+                    )
+                })
+            })
+            .collect();
+        return (!words.is_empty()).then(|| format!("{}: {check}", words.join("; ")));
+    }
     let span = points.extent();
     let side = image.width.max(image.height);
     (span < MIN_IMAGE_SPAN * side).then(|| {
         format!(
-            "the points span {} px of the {side} px image: check that image_size is the size \
-             of the image the coordinates were measured in",
+            "the points span {} px of the {side} px image: {check}",
             span.round()
         )
     })
+}
+
+/// The longer side of the bounding box of view `v`'s (x, y) in every row of a correspondence
+/// set (columns 2v and 2v + 1).
+fn view_extent(points: &PointSet, v: usize) -> f64 {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for i in 0..points.len() {
+        let row = points.row(i);
+        for a in 0..2 {
+            lo[a] = lo[a].min(row[2 * v + a]);
+            hi[a] = hi[a].max(row[2 * v + a]);
+        }
+    }
+    (hi[0] - lo[0]).max(hi[1] - lo[1])
 }
 
 /// `labels` with group `out` answered -1 and the groups after it numbered one lower.
@@ -1191,6 +1234,20 @@ pub(crate) mod tests {
         let w = image_barely_used(&pairs, image(4000.0, 3000.0)).unwrap();
         assert!(
             w.starts_with("the points span 38 px of the 4000 px image"),
+            "{w}"
+        );
+        // Two images of two sizes: each view against its own image.
+        let two = |second| Some(ImageSize::per_view([300.0, 200.0], second).unwrap());
+        assert_eq!(image_barely_used(&pairs, two([320.0, 240.0])), None);
+        let w = image_barely_used(&pairs, two([4000.0, 3000.0])).unwrap();
+        assert!(
+            w.starts_with("the points of image 2 span 36 px of its 4000 px: check"),
+            "{w}"
+        );
+        let big = Some(ImageSize::per_view([4000.0, 3000.0], [5000.0, 3000.0]).unwrap());
+        let w = image_barely_used(&pairs, big).unwrap();
+        assert!(
+            w.starts_with("the points of image 1 span 36 px of its 4000 px; the points of image 2"),
             "{w}"
         );
         // Curves have no image.

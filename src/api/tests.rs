@@ -752,15 +752,21 @@ async fn unseen_positions_may_be_null() {
     // the place; in points2d, a null is just not a number.
     let mut wrong = json!(rows);
     wrong[6][1] = Value::Null;
-    for (body, place) in [
-        (with(wrong), "points[6][1]"),
+    for (body, place, says) in [
         (
-            json!({"kind": "trajectories", "points": nulled}),
+            with(wrong),
+            "points[6][1]",
+            "but visible has 1 for track 6, frame 0",
+        ),
+        (
+            json!({"kind": "trajectories", "points": nulled.clone()}),
             "points[9][4]",
+            "null only with visible, one row of 0/1 flags per track",
         ),
         (
             json!({"kind": "trajectories", "trajectory_matrix": matrix}),
             "trajectory_matrix[4][9]",
+            "null only with visible, one row of 0/1 flags per track",
         ),
     ] {
         let got = send(&app, post(&body)).await;
@@ -770,10 +776,26 @@ async fn unseen_positions_may_be_null() {
             message.starts_with(&format!("{place} is null")),
             "{message}"
         );
-        assert!(
-            message.contains("null only marks a track position not seen"),
-            "{message}"
-        );
+        assert!(message.contains(says), "{message}");
+    }
+    // A mask of the wrong shape is named as such, not as the nulls it fails to mark.
+    let flags: Vec<Value> = seen.clone();
+    let transposed: Vec<Vec<i64>> = (0..4).map(|_| vec![1; 10]).collect();
+    let short: Vec<Value> = flags
+        .iter()
+        .map(|f| json!(f.as_array().unwrap()[..3].to_vec()))
+        .collect();
+    for (mask, says) in [
+        (json!(transposed), "visible has 4 rows for 10 tracks"),
+        (json!(short), "visible row 0 has 3 flags for 4 frames"),
+    ] {
+        let body = json!({"kind": "trajectories", "points": nulled.clone(), "visible": mask});
+        let got = send(&app, post(&body)).await;
+        let message = got.2["error"]["message"]
+            .as_str()
+            .unwrap_or_default()
+            .to_string();
+        assert!(message.starts_with(says), "{message}");
     }
     let curve = json!({"kind": "points2d", "points": [[0, 0], [1, null], [2, 2]]});
     let got = send(&app, post(&curve)).await;

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use super::error::{ApiError, ErrorCode};
 use crate::cluster::{ClusterParams, Clustering, Selection};
-use crate::data::{ImageSize, Kind, PointSet, Visibility};
+use crate::data::{ImageSize, InputError, Kind, PointSet, Visibility};
 use crate::geometry::Model;
 use crate::pipeline::FitOutcome;
 use crate::refine::RefineParams;
@@ -119,6 +119,29 @@ fn fill_unseen(
         Layout::Rows => "points",
         Layout::Matrix => "trajectory_matrix",
     };
+    // The mask's shape first: a mask of the wrong shape would otherwise be reported as the
+    // nulls it fails to mark.
+    if let (Some(flags), Kind::Trajectories) = (visible, kind) {
+        let (tracks, frames) = match layout {
+            Layout::Rows => (rows.len(), rows.first().map_or(0, |r| r.len() / 2)),
+            Layout::Matrix => (rows.first().map_or(0, Vec::len), rows.len() / 2),
+        };
+        if flags.len() != tracks {
+            return Err(InputError::VisibleRows {
+                rows: flags.len(),
+                tracks,
+            }
+            .into());
+        }
+        if let Some((row, f)) = flags.iter().enumerate().find(|(_, f)| f.len() != frames) {
+            return Err(InputError::VisibleWidth {
+                row,
+                found: f.len(),
+                frames,
+            }
+            .into());
+        }
+    }
     rows.into_iter()
         .enumerate()
         .map(|(r, row)| {
@@ -141,11 +164,17 @@ fn fill_unseen(
                     }
                     let message = if kind != Kind::Trajectories {
                         format!("{field}[{r}][{c}] is null: coordinates are numbers")
+                    } else if visible.is_none() {
+                        format!(
+                            "{field}[{r}][{c}] is null: a track position not seen is null only \
+                             with visible, one row of 0/1 flags per track and one flag per \
+                             frame, 0 where the track was not seen (here track {track}, frame \
+                             {frame})"
+                        )
                     } else {
                         format!(
-                            "{field}[{r}][{c}] is null: coordinates are numbers, and null only \
-                             marks a track position not seen, where visible has 0 for track \
-                             {track}, frame {frame}"
+                            "{field}[{r}][{c}] is null, but visible has 1 for track {track}, \
+                             frame {frame}: null only marks a position visible marks 0"
                         )
                     };
                     Err(ApiError::new(ErrorCode::InvalidRequest, message))
