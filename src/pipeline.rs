@@ -427,6 +427,7 @@ pub fn fit(
     let as_sent = || {
         let mut outcome = fit_counting(model, points, image, options, "points")?;
         outcome.warnings.extend(image_barely_used(points, image));
+        outcome.warnings.extend(lost_marks(points));
         Ok(outcome)
     };
     let Some((size, (scale, shift))) = moved else {
@@ -1110,6 +1111,28 @@ fn image_barely_used(points: &PointSet, image: Option<ImageSize>) -> Option<Stri
     })
 }
 
+/// The warning of track positions at exactly (0, 0), what many trackers write for a point
+/// they lost: read as positions, they pull their tracks to the image corner. `None` for other
+/// kinds, or when there are none.
+fn lost_marks(points: &PointSet) -> Option<String> {
+    if points.kind() != Kind::Trajectories {
+        return None;
+    }
+    let zeros = points
+        .values()
+        .chunks_exact(2)
+        .filter(|p| p[0] == 0.0 && p[1] == 0.0)
+        .count();
+    (zeros > 0).then(|| {
+        format!(
+            "{zeros} track position{} exactly (0, 0): if they mark points the tracker lost, send \
+             visible (one row of 0/1 flags per track, 0 where it was not seen) so that they are \
+             not read as positions",
+            if zeros == 1 { " is" } else { "s are" }
+        )
+    })
+}
+
 /// The longer side of the bounding box of view `v`'s (x, y) in every row of a correspondence
 /// set (columns 2v and 2v + 1).
 fn view_extent(points: &PointSet, v: usize) -> f64 {
@@ -1224,6 +1247,32 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn tracks_at_the_origin_are_named_as_a_trackers_lost_points() {
+        let tracks = |lost: &[usize]| {
+            let mut values: Vec<f64> = (0..24).map(|v| f64::from(v) + 1.0).collect();
+            for &p in lost {
+                values[2 * p] = 0.0;
+                values[2 * p + 1] = 0.0;
+            }
+            PointSet::from_flat(Kind::Trajectories, 6, values).unwrap()
+        };
+        assert_eq!(lost_marks(&tracks(&[])), None);
+        let one = lost_marks(&tracks(&[4])).unwrap();
+        assert!(
+            one.starts_with("1 track position is exactly (0, 0)"),
+            "{one}"
+        );
+        let two = lost_marks(&tracks(&[4, 11])).unwrap();
+        assert!(
+            two.starts_with("2 track positions are exactly (0, 0)"),
+            "{two}"
+        );
+        // A pair at the origin is a point like any other.
+        let pairs = PointSet::from_flat(Kind::Correspondences, 4, vec![0.0; 8]).unwrap();
+        assert_eq!(lost_marks(&pairs), None);
+    }
+
+    #[test]
     fn points_in_a_corner_of_the_image_say_so() {
         // x from 0 to 38, y from 1 to 39.
         let values: Vec<f64> = (0..40).map(f64::from).collect();
@@ -1252,6 +1301,7 @@ pub(crate) mod tests {
         );
         // Curves have no image.
         let curve = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
+        assert_eq!(lost_marks(&curve), None);
         assert_eq!(image_barely_used(&curve, image(4000.0, 3000.0)), None);
     }
 
