@@ -9,15 +9,11 @@ whole with its visible mask. Needs a running server (numpy).
 import json, sys, glob, statistics as st
 import numpy as np
 sys.path.insert(0, 'research')
-from fitting import post
-from itertools import permutations
+from fitting import error, post
 port, data, model, rule = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4]
 def err(truth, lab, idx):
-    if not idx: return None
-    ks = sorted(set(truth[i] for i in idx)); KK = max(max(lab[i] for i in idx) + 1, len(ks)); best = 0
-    for p in permutations(range(KK), len(ks)):
-        m = dict(zip(ks, p)); best = max(best, sum(1 for i in idx if m[truth[i]] == lab[i]))
-    return 1 - best / len(idx)
+    """The error on the tracks `idx` alone."""
+    return error([truth[i] for i in idx], [lab[i] for i in idx]) if idx else None
 def span_of(vis, rule):
     n, F = vis.shape; best = None
     for a in range(F):
