@@ -126,7 +126,8 @@ fn expected_fit(server: &Server, example: &str) -> Value {
 fn the_page_fits_an_example_in_chromium() {
     let Some(chromium) = chromium() else { return };
     let server = Server::start(&[]);
-    for example in ["lce", "kt3dmoseg"] {
+    // two-cameras sends one image size per image, which the form passes through.
+    for example in ["lce", "kt3dmoseg", "two-cameras"] {
         let fit = expected_fit(&server, example);
         let n = fit["labels"].as_array().unwrap().len();
         let k = fit["k"].as_u64().unwrap();
@@ -144,6 +145,13 @@ fn the_page_fits_an_example_in_chromium() {
             n,
             "{example}: one mark per point"
         );
+        if example == "two-cameras" {
+            // Drawn with both sizes, so the page sent both.
+            assert!(
+                picture.contains("images 682 × 512 and 1023 × 768"),
+                "{example}: both image sizes sent"
+            );
+        }
         let legend = between(picture, r#"<g class="legend">"#, "</g>");
         assert!(
             legend.contains(&format!(">K = {k}</text>")),

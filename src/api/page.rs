@@ -13,11 +13,15 @@ pub const INDEX: &str = include_str!("page/index.html");
 
 /// The bundled examples by file name, each a `POST /v1/fit` body (`scripts/page-examples.sh`
 /// regenerates them; their sources are credited on the page).
-pub const EXAMPLES: [(&str, &str); 3] = [
+pub const EXAMPLES: [(&str, &str); 4] = [
     ("lce.json", include_str!("page/examples/lce.json")),
     (
         "adelaidermf.json",
         include_str!("page/examples/adelaidermf.json"),
+    ),
+    (
+        "two-cameras.json",
+        include_str!("page/examples/two-cameras.json"),
     ),
     (
         "kt3dmoseg.json",
