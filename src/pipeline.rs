@@ -418,6 +418,18 @@ pub fn fit(
     image: Option<ImageSize>,
     options: &FitOptions,
 ) -> Result<FitOutcome, FitError> {
+    fit_sent(model, points, image, options, false)
+}
+
+/// [`fit`] of a set sent with (`masked`) or without a visibility mask: tracks at (0, 0) draw
+/// the lost-point warning ([`lost_marks`]) only without one.
+fn fit_sent(
+    model: &LoadedModel,
+    points: &PointSet,
+    image: Option<ImageSize>,
+    options: &FitOptions,
+    masked: bool,
+) -> Result<FitOutcome, FitError> {
     // Two images of two sizes: the fit runs with the second view in the first image's frame
     // (where the network reads it, and where refinement weighs both views' pixels alike), and
     // the structures come back in each image's own pixels.
@@ -427,7 +439,9 @@ pub fn fit(
     let as_sent = || {
         let mut outcome = fit_counting(model, points, image, options, "points")?;
         outcome.warnings.extend(image_barely_used(points, image));
-        outcome.warnings.extend(lost_marks(points));
+        outcome
+            .warnings
+            .extend(lost_marks(points).filter(|_| !masked));
         Ok(outcome)
     };
     let Some((size, (scale, shift))) = moved else {
@@ -594,7 +608,7 @@ pub fn fit_seen(
         )));
     }
     if visibility.is_complete() {
-        return fit(model, points, image, options);
+        return fit_sent(model, points, image, options, true);
     }
     let complete = visibility.complete();
     let throughout = points

@@ -406,9 +406,17 @@ fn a_second_image_of_another_size_answers_as_one_camera_would() {
     let structures = two["structures"].as_array().unwrap();
     assert!(!structures.is_empty());
     for s in structures {
-        let m: Vec<f64> = (0..9)
-            .map(|i| s["params"]["h"][i].as_f64().unwrap())
-            .collect();
+        // A homography, or an affine map (GRIC may choose it) as its 3 x 3 matrix.
+        let m: Vec<f64> = match s["type"].as_str() {
+            Some("homography") => (0..9)
+                .map(|i| s["params"]["h"][i].as_f64().unwrap())
+                .collect(),
+            Some("affine") => (0..6)
+                .map(|i| s["params"]["a"][i].as_f64().unwrap())
+                .chain([0.0, 0.0, 1.0])
+                .collect(),
+            other => panic!("structure type {other:?}"),
+        };
         let label = s["label"].as_i64().unwrap();
         let mut d: Vec<f64> = labels(&two)
             .iter()

@@ -797,6 +797,27 @@ async fn unseen_positions_may_be_null() {
             .to_string();
         assert!(message.starts_with(says), "{message}");
     }
+    // Track 0 starts at (0, 0): a tracker's lost-point mark without a mask, a position with one.
+    let all_seen = vec![json!([1, 1, 1, 1]); 10];
+    for (body, warned) in [
+        (
+            json!({"kind": "trajectories", "points": rows, "k": 2}),
+            true,
+        ),
+        (
+            json!({"kind": "trajectories", "points": rows, "k": 2, "visible": all_seen}),
+            false,
+        ),
+    ] {
+        let (status, _, answer) = send(&app, post(&body)).await;
+        assert_eq!(status, StatusCode::OK, "{answer}");
+        let says = answer["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("exactly (0, 0)"));
+        assert_eq!(says, warned, "{answer}");
+    }
     let curve = json!({"kind": "points2d", "points": [[0, 0], [1, null], [2, 2]]});
     let got = send(&app, post(&curve)).await;
     check_error("null in points2d", &got, ErrorCode::InvalidRequest);

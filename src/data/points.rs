@@ -141,8 +141,8 @@ impl ImageSize {
     /// The sizes of a correspondence's two images, each checked as by [`ImageSize::new`]; one
     /// size when they are equal.
     pub fn per_view([w1, h1]: [f64; 2], [w2, h2]: [f64; 2]) -> Result<Self, InputError> {
-        let second = Self::new(w2, h2)?;
         let mut first = Self::new(w1, h1)?;
+        let second = Self::new(w2, h2)?;
         if (w1, h1) != (w2, h2) {
             first.second = Some([second.width, second.height]);
         }
