@@ -430,12 +430,6 @@ fn fit_sent(
     options: &FitOptions,
     masked: bool,
 ) -> Result<FitOutcome, FitError> {
-    // Two images of two sizes: the fit runs with the second view in the first image's frame
-    // (where the network reads it, and where refinement weighs both views' pixels alike), and
-    // the structures come back in each image's own pixels.
-    let moved = image
-        .filter(|_| points.kind() == Kind::Correspondences)
-        .and_then(|size| Some((size, size.second_view_move()?)));
     let as_sent = || {
         let mut outcome = fit_counting(model, points, image, options, "points")?;
         outcome.warnings.extend(image_barely_used(points, image));
@@ -444,12 +438,16 @@ fn fit_sent(
             .extend(lost_marks(points).filter(|_| !masked));
         Ok(outcome)
     };
-    let Some((size, (scale, shift))) = moved else {
+    // Two images of two sizes: the fit runs with the second view in the first image's frame
+    // (where the network reads it, and where refinement weighs both views' pixels alike), and
+    // the structures come back in each image's own pixels. Anything else, or a move out of the
+    // accepted range (which the API refuses), is fitted as sent.
+    let Some(size) = image else {
         return as_sent();
     };
-    let (moved, first) = size.in_first_frame(points);
-    let Cow::Owned(moved) = moved else {
-        // Not moved (out of the accepted range; the API refuses such sizes): as sent.
+    let (Some((scale, shift)), (Cow::Owned(moved), first)) =
+        (size.second_view_move(), size.in_first_frame(points))
+    else {
         return as_sent();
     };
     let mut outcome = fit_counting(model, &moved, Some(first), options, "points")?;
@@ -1101,7 +1099,7 @@ fn image_barely_used(points: &PointSet, image: Option<ImageSize>) -> Option<Stri
     if image.second.is_some() && points.kind() == Kind::Correspondences {
         let words: Vec<String> = (0..2)
             .filter_map(|v| {
-                let span = view_extent(points, v);
+                let span = points.view_extent(v);
                 let [w, h] = image.view(v);
                 let side = w.max(h);
                 (span < MIN_IMAGE_SPAN * side).then(|| {
@@ -1145,20 +1143,6 @@ fn lost_marks(points: &PointSet) -> Option<String> {
             if zeros == 1 { " is" } else { "s are" }
         )
     })
-}
-
-/// The longer side of the bounding box of view `v`'s (x, y) in every row of a correspondence
-/// set (columns 2v and 2v + 1).
-fn view_extent(points: &PointSet, v: usize) -> f64 {
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for i in 0..points.len() {
-        let row = points.row(i);
-        for a in 0..2 {
-            lo[a] = lo[a].min(row[2 * v + a]);
-            hi[a] = hi[a].max(row[2 * v + a]);
-        }
-    }
-    (hi[0] - lo[0]).max(hi[1] - lo[1])
 }
 
 /// `labels` with group `out` answered -1 and the groups after it numbered one lower.

@@ -1,6 +1,5 @@
 //! Wire types of the API and their parsing into validated domain values.
 
-use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -356,8 +355,8 @@ impl FitRequest {
             .as_ref()
             .map(|v| image_size(v, kind))
             .transpose()?;
-        if let Some(size) = image_size.filter(|s| s.second.is_some())
-            && matches!(size.in_first_frame(&points).0, Cow::Borrowed(_))
+        if let Some(size) = image_size
+            && !size.moves_in_range(&points)
         {
             return Err(ApiError::new(
                 ErrorCode::InvalidPoints,

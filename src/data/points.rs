@@ -187,21 +187,26 @@ impl ImageSize {
         else {
             return (Cow::Borrowed(points), first);
         };
-        let dim = points.dim();
-        let mut values = points.values().to_vec();
-        for row in values.chunks_exact_mut(dim) {
-            for (j, v) in row.iter_mut().enumerate() {
-                // Columns x1, y1, x2, y2: the second pair is the second view.
-                if (j / 2) % 2 == 1 {
-                    *v = *v * scale + shift[j % 2];
-                }
-            }
-        }
-        match PointSet::from_flat(points.kind(), dim, values) {
+        match points.second_view_mapped(|a, v| v * scale + shift[a]) {
             Ok(moved) => (Cow::Owned(moved), first),
             // Out of the accepted range: read as sent.
             Err(_) => (Cow::Borrowed(points), first),
         }
+    }
+
+    /// Whether [`ImageSize::in_first_frame`] keeps `points` within the accepted coordinates
+    /// (always, for one size), without moving them.
+    pub fn moves_in_range(&self, points: &PointSet) -> bool {
+        let Some((scale, shift)) = self
+            .second_view_move()
+            .filter(|_| points.kind() == Kind::Correspondences)
+        else {
+            return true;
+        };
+        (0..points.len()).all(|i| {
+            let row = points.row(i);
+            (0..2).all(|a| (row[2 + a] * scale + shift[a]).abs() <= MAX_ABS_COORD)
+        })
     }
 }
 
@@ -314,7 +319,29 @@ impl PointSet {
     /// The longer side of the bounding box of every (x, y) pair (over every view or frame):
     /// what [`Normalization::ImageFrame`] scales by when no image size is given.
     pub fn extent(&self) -> f64 {
-        2.0 * bounding_frame(&self.values).2
+        2.0 * bounding_frame(self.values.chunks_exact(2)).2
+    }
+    /// [`PointSet::extent`] of view `v` alone: the (x, y) pairs in columns 2v and 2v + 1.
+    pub fn view_extent(&self, v: usize) -> f64 {
+        let pairs = self
+            .values
+            .chunks_exact(self.dim)
+            .map(|r| &r[2 * v..2 * v + 2]);
+        2.0 * bounding_frame(pairs).2
+    }
+    /// The set with the second view of each correspondence (columns x2, y2) mapped by
+    /// `map(axis, value)`, axis 0 for x and 1 for y (other kinds have no second view: as they
+    /// are); `Err` where a mapped value leaves the accepted range.
+    pub fn second_view_mapped(&self, map: impl Fn(usize, f64) -> f64) -> Result<Self, InputError> {
+        let mut values = self.values.clone();
+        if self.kind == Kind::Correspondences {
+            for row in values.chunks_exact_mut(self.dim) {
+                for (a, v) in row[2..4].iter_mut().enumerate() {
+                    *v = map(a, *v);
+                }
+            }
+        }
+        Self::from_flat(self.kind, self.dim, values)
     }
     pub fn row(&self, i: usize) -> &[f64] {
         &self.values[i * self.dim..(i + 1) * self.dim]
@@ -358,7 +385,7 @@ impl Normalization {
             Normalization::CentroidUnitRms => centroid_rms(points.values()),
             Normalization::ImageFrame => match image {
                 Some(s) => (s.width / 2.0, s.height / 2.0, s.width.max(s.height) / 2.0),
-                None => bounding_frame(points.values()),
+                None => bounding_frame(points.values().chunks_exact(2)),
             },
         };
         // A set of (nearly) coincident points has no scale: a zero or subnormal spread, whose
@@ -391,10 +418,10 @@ fn centroid_rms(values: &[f64]) -> (f64, f64, f64) {
 }
 
 /// Centre and half the longer side of the bounding box of all (x, y) pairs.
-fn bounding_frame(values: &[f64]) -> (f64, f64, f64) {
+fn bounding_frame<'a>(pairs: impl Iterator<Item = &'a [f64]>) -> (f64, f64, f64) {
     let mut lo = [f64::INFINITY; 2];
     let mut hi = [f64::NEG_INFINITY; 2];
-    for p in values.chunks_exact(2) {
+    for p in pairs {
         for a in 0..2 {
             lo[a] = lo[a].min(p[a]);
             hi[a] = hi[a].max(p[a]);

@@ -619,18 +619,10 @@ pub fn rescale(seq: &Sequence, factor: f64) -> Sequence {
 /// The second image taken at `factor` times the first's resolution: its coordinates and its
 /// size (sent per image) multiplied by `factor`, the first view's unchanged.
 pub fn rescale_second_view(seq: &Sequence, factor: f64) -> Sequence {
-    let dim = seq.points.dim();
-    let values: Vec<f64> = (seq.points.values().iter().enumerate())
-        .map(|(i, v)| {
-            if (i % dim) / 2 % 2 == 1 {
-                v * factor
-            } else {
-                *v
-            }
-        })
-        .collect();
     Sequence {
-        points: PointSet::from_flat(seq.points.kind(), dim, values).expect("finite values"),
+        points: (seq.points)
+            .second_view_mapped(|_, v| v * factor)
+            .expect("finite values"),
         image_size: seq.image_size.map(|s| {
             ImageSize::per_view([s.width, s.height], [s.width * factor, s.height * factor])
                 .expect("positive")
