@@ -17,6 +17,9 @@
 //! 5. **refine** ([`crate::refine`]): an explicit model per group (line, circle, ellipse,
 //!    homography, fundamental matrix, motion subspace), fitted on the input as sent (every frame,
 //!    caller's units); points reassigned to the structure they fit best, outliers labelled −1.
+//!    With K chosen, the k + 1 clustering is refined too and answers where it splits a structure
+//!    that pooled two ([`refine_chosen`]); with a k given, where the outliers take a group of
+//!    their own.
 //! 6. **answer** ([`FitOutcome`]): labels, K, structures, the residual curve and the stage
 //!    timings.
 
@@ -411,6 +414,45 @@ pub fn refine(
     )
 }
 
+/// Stage 5 with K chosen automatically: the clustering refined, and the k + 1 clustering
+/// refined too where the choice considered k + 1; the wider answer is kept where it splits a
+/// structure that pooled two ([`refine::splits_pooled`]). SOD stops at k when splitting a group
+/// lowers the embeddings' residual little, and refinement cannot split a structure that holds
+/// two planes or curves: their pooled fit sets a noise level under which both fit. A K the
+/// caller gave, and motion subspaces, are refined as they are. -> the clustering the answer
+/// came from (with both residual curves when it is the wider one), and the answer.
+pub fn refine_chosen(
+    model: &LoadedModel,
+    points: &PointSet,
+    embedding: &Embedding,
+    params: &ClusterParams,
+    clustering: &Clustering,
+    r: &RefineParams,
+) -> Result<(Clustering, Refined), FitError> {
+    let refined = refine(model, points, clustering, r);
+    let k = clustering.k;
+    let considered = clustering.scores.iter().map(|s| s.0).max().unwrap_or(k);
+    let read = embedding.values.len() / embedding.width.max(1);
+    if matches!(clustering.selection, Selection::Fixed(_))
+        || model.card.family() == geometry::Family::Subspace
+        || k + 1 > considered.min(read)
+    {
+        return Ok((clustering.clone(), refined));
+    }
+    // Clustered with k + 1 fixed, refined as a chosen K (structures may merge, or be added).
+    let wider = Clustering {
+        selection: clustering.selection,
+        scores: clustering.scores.clone(),
+        ..cluster(model, embedding, &params.with_fixed_k(k + 1)?)?
+    };
+    let again = refine(model, points, &wider, r);
+    Ok(if refine::splits_pooled(&refined, &again, points.len()) {
+        (both_ks(clustering, wider), again)
+    } else {
+        (clustering.clone(), refined)
+    })
+}
+
 /// The whole fit of one point set, stage by stage.
 pub fn fit(
     model: &LoadedModel,
@@ -505,7 +547,15 @@ fn fit_counting(
     let t2 = Instant::now();
     let (labels, structures, k) = match &refine_params {
         Some(r) => {
-            let mut refined = refine(model, points, &clustering, r);
+            let mut refined = match given {
+                Some(_) => refine(model, points, &clustering, r),
+                None => {
+                    let (from, refined) =
+                        refine_chosen(model, points, &embedding, params, &clustering, r)?;
+                    clustering = from;
+                    refined
+                }
+            };
             // Refinement dissolves the outlier group into -1 labels, so the k + 1 clustering is
             // refined too, and its answer is kept when it has no more than k structures and no
             // fewer than the k clustering's. (Refining it only where the k answer shows outliers

@@ -305,11 +305,24 @@ pub fn fit(family: Family, rows: &[&[f64]]) -> Fit {
     select::fit_family(family, rows)
 }
 
+/// [`fit`], where `known` is a fit of one of the family's curve types on exactly `rows`
+/// (refinement's last round): that candidate is not fitted again.
+pub fn fit_knowing(family: Family, rows: &[&[f64]], known: &Fit) -> Fit {
+    select::fit_family_knowing(family, rows, Some(known))
+}
+
 /// Fits exactly one model type by name (`"line"`, `"circle"`, `"ellipse"`, `"homography"`,
 /// `"affine"`, `"fundamental"`, `"subspace"`), robustly; `None` for any other name. Degenerate
 /// input gives `Some` fit with `Model::Degenerate`.
 pub fn fit_type(type_name: &str, rows: &[&[f64]]) -> Option<Fit> {
     select::fit_one(type_name, rows)
+}
+
+/// A circle or an ellipse fitted again on `rows`, started from `model`: for rows that moved a
+/// little since `model` was fitted (refinement's rounds). `None` for other models, or where the
+/// start cannot be evaluated: fit from scratch then ([`fit_type`]).
+pub fn refit_curve(model: &Model, rows: &[&[f64]]) -> Option<Fit> {
+    select::refit_curve(model, rows)
 }
 
 /// The plain least-squares fit of one type by name (no robust loop, no geometric refinement):

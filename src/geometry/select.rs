@@ -50,7 +50,8 @@ use super::homography::{
 use super::linalg::Mat3;
 use super::line::{self, LineEstimator};
 use super::robust::{
-    Estimator, INLIER_SIGMAS, Robust, SIGMA_FLOOR, fit_robust, fit_unrefined, refine_robust,
+    Estimator, INLIER_SIGMAS, Robust, SIGMA_FLOOR, evaluate, fit_robust, fit_unrefined,
+    refine_robust,
 };
 use super::subspace::{RIGID_RANK, SubspaceEstimator, fit_subspace, subspace_model};
 use super::{Family, Fit, GeometryError, Model, validate};
@@ -266,6 +267,46 @@ pub fn fit_one(type_name: &str, rows: &[&[f64]]) -> Option<Fit> {
     })
 }
 
+/// A curve fitted again from `model` on `rows` that moved a little: the geometric refinement
+/// ([`refine_robust`]) started from the model's own parameters, on the rows it explains,
+/// instead of a fit from scratch. `None` for a model that is not a circle or an ellipse, or rows
+/// it cannot be evaluated on (the caller fits from scratch).
+pub fn refit_curve(model: &Model, rows: &[&[f64]]) -> Option<Fit> {
+    let pts = points2(rows).ok()?;
+    let scale = spread(pts.iter().copied());
+    let r = match *model {
+        Model::Circle { cx, cy, r } => {
+            let est = CircleEstimator;
+            if pts.len() < est.min_points() {
+                return None;
+            }
+            let start = evaluate(&est, [cx, cy, r], &pts, scale);
+            candidate("circle", refine_robust(&est, &pts, start, scale), |p| {
+                circle_model(*p)
+            })
+        }
+        Model::Ellipse {
+            cx,
+            cy,
+            a,
+            b,
+            theta,
+        } => {
+            let est = EllipseEstimator;
+            if pts.len() < est.min_points() {
+                return None;
+            }
+            let start = evaluate(&est, [cx, cy, a, b, theta], &pts, scale);
+            candidate("ellipse", refine_robust(&est, &pts, start, scale), |p| {
+                ellipse_model(*p)
+            })
+        }
+        _ => return None,
+    };
+    let kept = r.fit.inliers.iter().filter(|&&v| v).count();
+    (r.fit.rms.is_finite() && kept >= model.min_points()).then_some(r.fit)
+}
+
 /// (r, d, k) of a candidate.
 fn dimensions(name: &str) -> (f64, f64, f64) {
     match name {
@@ -345,6 +386,12 @@ fn is_thin_conic(c: &Candidate, scale: f64) -> bool {
 
 /// Fits every candidate of `family` and keeps the one GRIC prefers.
 pub fn fit_family(family: Family, rows: &[&[f64]]) -> Fit {
+    fit_family_knowing(family, rows, None)
+}
+
+/// [`fit_family`], where `known` is already a fit of one curve type on exactly `rows`: that
+/// candidate is taken as it is instead of being fitted again.
+pub fn fit_family_knowing(family: Family, rows: &[&[f64]], known: Option<&Fit>) -> Fit {
     let n = rows.len();
     // Candidates from the simplest to the most general.
     let (fitted, errors, scale): (Vec<Candidate>, Vec<String>, f64) = match family {
@@ -357,8 +404,16 @@ pub fn fit_family(family: Family, rows: &[&[f64]]) -> Fit {
                 Err(reason) => return degenerate(reason.to_string(), n),
             };
             let scale = spread(pts.iter().copied());
-            let (mut ok, mut err) =
-                run_all(&["line", "circle", "ellipse"], |name| curve(name, &pts));
+            let (mut ok, mut err) = run_all(&["line", "circle", "ellipse"], |name| {
+                match known.filter(|f| f.model.type_name() == name) {
+                    Some(f) => Some(Ok(Candidate {
+                        name: f.model.type_name(),
+                        fit: f.clone(),
+                        distances: rows.iter().map(|r| f.model.residual(r)).collect(),
+                    })),
+                    None => curve(name, &pts),
+                }
+            });
             ok.retain(|c| {
                 let thin = is_thin_conic(c, scale);
                 if thin {
@@ -475,6 +530,99 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    #[test]
+    fn a_curve_refitted_from_its_model_matches_one_fitted_from_scratch() {
+        use super::super::{Fit, Model, fit_type, refit_curve};
+        for shape in ["circle", "ellipse"] {
+            let mut rng = Rng::new(3);
+            let rows = curve_rows(&mut rng, shape, 80, 0.02);
+            let scratch = fit_type(shape, &view(&rows)).unwrap();
+            // Started from a model a little off, on the same rows.
+            let start = match scratch.model {
+                Model::Circle { cx, cy, r } => Model::Circle {
+                    cx: cx + 0.05,
+                    cy,
+                    r: r * 1.03,
+                },
+                Model::Ellipse {
+                    cx,
+                    cy,
+                    a,
+                    b,
+                    theta,
+                } => Model::Ellipse {
+                    cx: cx + 0.05,
+                    cy: cy - 0.03,
+                    a: a * 1.03,
+                    b,
+                    theta: theta + 0.02,
+                },
+                ref m => panic!("{shape}: {m:?}"),
+            };
+            let warm = refit_curve(&start, &view(&rows)).unwrap();
+            assert_sane(&warm, rows.len());
+            assert_eq!(warm.model.type_name(), shape);
+            assert!(
+                (warm.rms - scratch.rms).abs() <= 1e-3 * scratch.rms,
+                "{warm:?} / {scratch:?}"
+            );
+            let r = |f: &Fit| rows.iter().map(|p| f.model.residual(p)).fold(0.0, f64::max);
+            assert!((r(&warm) - r(&scratch)).abs() < 1e-3, "{shape}");
+        }
+        // Lines (closed form), two-view models and too few points: fitted from scratch.
+        let mut rng = Rng::new(4);
+        let line = curve_rows(&mut rng, "line", 20, 0.01);
+        let l = fit_type("line", &view(&line)).unwrap();
+        assert!(refit_curve(&l.model, &view(&line)).is_none());
+        let circle = Model::Circle {
+            cx: 0.0,
+            cy: 0.0,
+            r: 1.0,
+        };
+        assert!(refit_curve(&circle, &view(&line[..2])).is_none());
+    }
+
+    #[test]
+    fn a_known_candidate_is_taken_as_it_is() {
+        use super::super::{Model, fit_knowing, fit_type};
+        for shape in ["circle", "ellipse"] {
+            let mut rng = Rng::new(5);
+            let rows = curve_rows(&mut rng, shape, 60, 0.03);
+            // A fit of the right type that is not the one fitting from scratch gives (its
+            // centre moved, its inliers and RMS as they were): it is the answer, as it is.
+            let scratch = fit_type(shape, &view(&rows)).unwrap();
+            let mut known = scratch.clone();
+            known.model = match known.model {
+                Model::Circle { cx, cy, r } => Model::Circle {
+                    cx: cx + 1e-3,
+                    cy,
+                    r,
+                },
+                Model::Ellipse {
+                    cx,
+                    cy,
+                    a,
+                    b,
+                    theta,
+                } => Model::Ellipse {
+                    cx: cx + 1e-3,
+                    cy,
+                    a,
+                    b,
+                    theta,
+                },
+                m => panic!("{m:?}"),
+            };
+            assert_ne!(known, scratch);
+            assert_eq!(fit_knowing(Family::Curves, &view(&rows), &known), known);
+            // A worse fit of another type, brought in, does not win the choice.
+            let worse = fit_type("line", &view(&rows)).unwrap();
+            let again = fit_knowing(Family::Curves, &view(&rows), &worse);
+            assert_eq!(again, fit(Family::Curves, &view(&rows)));
+            assert_eq!(again.model.type_name(), shape);
         }
     }
 

@@ -107,10 +107,11 @@ fn score(
             nmi: nmi(&sample.labels, &clustering.labels),
             outliers: None,
         },
-        (Some(r), None) => refined_score(
-            sample,
-            &pipeline::refine(model, &sample.points, &clustering, r),
-        ),
+        (Some(r), None) => {
+            let (_, refined) =
+                pipeline::refine_chosen(model, &sample.points, embedding, &params, &clustering, r)?;
+            refined_score(sample, &refined)
+        }
     };
     Ok((score, clustering))
 }
