@@ -488,7 +488,7 @@ mod tests {
     use super::super::fundamental::tests::{MOTION_R, MOTION_T, rigid_scene};
     use super::super::homography::tests::planar_scene;
     use super::super::testutil::{Rng, assert_sane, is_degenerate, view};
-    use super::super::{Family, fit};
+    use super::super::{Family, Fit, Model, fit};
 
     fn curve_rows(rng: &mut Rng, shape: &str, n: usize, sigma: f64) -> Vec<Vec<f64>> {
         (0..n)
@@ -533,35 +533,47 @@ mod tests {
         }
     }
 
+    /// A circle or an ellipse moved by (dx, dy), its (major) radius times `grow`, turned by `turn`.
+    fn nudged(
+        m: &super::super::Model,
+        dx: f64,
+        dy: f64,
+        grow: f64,
+        turn: f64,
+    ) -> super::super::Model {
+        use super::super::Model;
+        match *m {
+            Model::Circle { cx, cy, r } => Model::Circle {
+                cx: cx + dx,
+                cy: cy + dy,
+                r: r * grow,
+            },
+            Model::Ellipse {
+                cx,
+                cy,
+                a,
+                b,
+                theta,
+            } => Model::Ellipse {
+                cx: cx + dx,
+                cy: cy + dy,
+                a: a * grow,
+                b,
+                theta: theta + turn,
+            },
+            ref m => panic!("not a conic: {m:?}"),
+        }
+    }
+
     #[test]
     fn a_curve_refitted_from_its_model_matches_one_fitted_from_scratch() {
-        use super::super::{Fit, Model, fit_type, refit_curve};
+        use super::super::{fit_type, refit_curve};
         for shape in ["circle", "ellipse"] {
             let mut rng = Rng::new(3);
             let rows = curve_rows(&mut rng, shape, 80, 0.02);
             let scratch = fit_type(shape, &view(&rows)).unwrap();
             // Started from a model a little off, on the same rows.
-            let start = match scratch.model {
-                Model::Circle { cx, cy, r } => Model::Circle {
-                    cx: cx + 0.05,
-                    cy,
-                    r: r * 1.03,
-                },
-                Model::Ellipse {
-                    cx,
-                    cy,
-                    a,
-                    b,
-                    theta,
-                } => Model::Ellipse {
-                    cx: cx + 0.05,
-                    cy: cy - 0.03,
-                    a: a * 1.03,
-                    b,
-                    theta: theta + 0.02,
-                },
-                ref m => panic!("{shape}: {m:?}"),
-            };
+            let start = nudged(&scratch.model, 0.05, -0.03, 1.03, 0.02);
             let warm = refit_curve(&start, &view(&rows)).unwrap();
             assert_sane(&warm, rows.len());
             assert_eq!(warm.model.type_name(), shape);
@@ -572,7 +584,8 @@ mod tests {
             let r = |f: &Fit| rows.iter().map(|p| f.model.residual(p)).fold(0.0, f64::max);
             assert!((r(&warm) - r(&scratch)).abs() < 1e-3, "{shape}");
         }
-        // Lines (closed form), two-view models and too few points: fitted from scratch.
+        // A line (a closed-form fit) and a circle on fewer points than determine it: fitted
+        // from scratch by the caller.
         let mut rng = Rng::new(4);
         let line = curve_rows(&mut rng, "line", 20, 0.01);
         let l = fit_type("line", &view(&line)).unwrap();
@@ -587,34 +600,16 @@ mod tests {
 
     #[test]
     fn a_known_candidate_is_taken_as_it_is() {
-        use super::super::{Model, fit_knowing, fit_type};
+        use super::super::{fit_knowing, fit_type};
         for shape in ["circle", "ellipse"] {
             let mut rng = Rng::new(5);
             let rows = curve_rows(&mut rng, shape, 60, 0.03);
             // A fit of the right type that is not the one fitting from scratch gives (its
             // centre moved, its inliers and RMS as they were): it is the answer, as it is.
             let scratch = fit_type(shape, &view(&rows)).unwrap();
-            let mut known = scratch.clone();
-            known.model = match known.model {
-                Model::Circle { cx, cy, r } => Model::Circle {
-                    cx: cx + 1e-3,
-                    cy,
-                    r,
-                },
-                Model::Ellipse {
-                    cx,
-                    cy,
-                    a,
-                    b,
-                    theta,
-                } => Model::Ellipse {
-                    cx: cx + 1e-3,
-                    cy,
-                    a,
-                    b,
-                    theta,
-                },
-                m => panic!("{m:?}"),
+            let known = Fit {
+                model: nudged(&scratch.model, 1e-3, 0.0, 1.0, 0.0),
+                ..scratch.clone()
             };
             assert_ne!(known, scratch);
             assert_eq!(fit_knowing(Family::Curves, &view(&rows), &known), known);
