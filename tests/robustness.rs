@@ -264,6 +264,49 @@ fn correspondence_cells_and_fold_models() {
     assert!(
         (known(&cell(&f, "as-is")["known"]) - known(&summary["totals"]["known"])).abs() < 1e-12
     );
+    // The model card's test symmetries apply to the fold models, as they do in a fit: the as-is
+    // cell is then each fold model's eval under them.
+    let card_path = model.join("model.json");
+    let mut card: Value = serde_json::from_slice(&std::fs::read(&card_path).unwrap()).unwrap();
+    card["test_symmetries"] = serde_json::json!(["reverse"]);
+    std::fs::write(&card_path, card.to_string()).unwrap();
+    let sym_out = temp("ad-folds-sym");
+    let mut with_symmetry = with_folds;
+    with_symmetry[6] = s(&sym_out);
+    ok(&with_symmetry);
+    let mean_under_reverse = names
+        .iter()
+        .map(|name| {
+            let fold = cv.join("models").join(name);
+            let pair = data.join(format!("{name}.json"));
+            let out = run(&[
+                "eval",
+                "--model",
+                s(&fold),
+                "--data",
+                s(&pair),
+                "--k-max",
+                "4",
+                "--test-symmetry",
+                "reverse",
+                "--json",
+            ]);
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+            known(&v["totals"]["known"])
+        })
+        .sum::<f64>()
+        / names.len() as f64;
+    let with_reverse = known(&cell(&report(&sym_out), "as-is")["known"]);
+    assert!(
+        (with_reverse - mean_under_reverse).abs() < 1e-12,
+        "{with_reverse} / {mean_under_reverse}"
+    );
+
     // A missing fold model is named.
     std::fs::remove_dir_all(cv.join("models").join("physics")).unwrap();
     let err = refused(&with_folds);

@@ -208,13 +208,15 @@ fn load(dir: &Path) -> Result<LoadedModel, RobustnessError> {
 }
 
 impl Models {
-    /// The model that scores samples of sequence `name`.
+    /// The model that scores samples of sequence `name`. A fold model stands in for the
+    /// model's network: it embeds under the model card's test symmetries, as a fit would.
     fn for_sequence(&mut self, name: &str) -> Result<&LoadedModel, RobustnessError> {
         let Some((dir, cache)) = &mut self.folds else {
             return Ok(&self.main);
         };
         if !cache.contains_key(name) {
-            let model = load(&dir.join("models").join(name))?;
+            let mut model = load(&dir.join("models").join(name))?;
+            model.card.test_symmetries = self.main.card.test_symmetries.clone();
             if model.card.kind != self.main.card.kind
                 || model.card.input_dim != self.main.card.input_dim
             {
