@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Two running servers (two builds, or one build started with and without a setting) fitting the
-same AdelaideRMF pair in turn: the medians of their timing_ms (refine and total), K chosen by the
-model's card, and whether their labels agree.
+same AdelaideRMF pair in turn: the medians of their timing_ms (embed, refine and total), K chosen
+by the model's card, and whether their labels agree.
 
 Usage: research/alternate-latency.py PORT_A PORT_B [PAIR] [MODEL] [FITS]
        (defaults: bonhall, adelaide-homography, 12 fits each; ../shared/datasets needed)

@@ -86,7 +86,7 @@ for model in "${@:-kt3dmoseg motion adelaide-homography adelaide-fundamental lce
         $T train --name adelaide-fundamental --out models/adelaide-fundamental --run-dir runs/af-twoview \
           --data "$data/adelaidermf" --model-type fundamental --init runs/twoview-f-pre/model \
           --loss mimi --embed-dim 6 --width 128 --depth 12 --neighbors 8 --graph-neighbors 8 \
-          --lr 1e-4 --schedule cosine --epochs 10 --k-max 8 \
+          --lr 1e-4 --schedule cosine --epochs 10 --k-max 8 --test-symmetry reverse \
           --describe "AdelaideRMF fundamental (rigid motions), all 19 pairs, outliers as one more group; started from a network pretrained on 4000 synthetic two-view fundamental pairs (gen-twoview fundamental, seed 301, 3 epochs, MIMI)"
         keep_serving adelaide-fundamental ;;
       lce)
