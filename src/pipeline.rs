@@ -439,18 +439,33 @@ pub fn refine_chosen(
     {
         return Ok((clustering.clone(), refined));
     }
-    // Clustered with k + 1 fixed, refined as a chosen K (structures may merge, or be added).
-    let wider = Clustering {
-        selection: clustering.selection,
-        scores: clustering.scores.clone(),
-        ..cluster(model, embedding, &params.with_fixed_k(k + 1)?)?
-    };
-    let again = refine(model, points, &wider, r);
+    let (wider, again) = refine_one_more(model, points, embedding, params, clustering, r)?;
     Ok(if refine::splits_pooled(&refined, &again, points.len()) {
         (both_ks(clustering, wider), again)
     } else {
         (clustering.clone(), refined)
     })
+}
+
+/// The clustering of `embedding` into one group more than `clustering`, refined: where the k
+/// answer pooled two structures (a chosen K, [`refine_chosen`]) or gave the outliers no group of
+/// their own (a k given). A chosen K's selection and scores are kept, so that the wider
+/// clustering is refined as a chosen K too (structures may merge, or be added).
+fn refine_one_more(
+    model: &LoadedModel,
+    points: &PointSet,
+    embedding: &Embedding,
+    params: &ClusterParams,
+    clustering: &Clustering,
+    r: &RefineParams,
+) -> Result<(Clustering, Refined), FitError> {
+    let mut wider = cluster(model, embedding, &params.with_fixed_k(clustering.k + 1)?)?;
+    if !matches!(clustering.selection, Selection::Fixed(_)) {
+        wider.selection = clustering.selection;
+        wider.scores = clustering.scores.clone();
+    }
+    let again = refine(model, points, &wider, r);
+    Ok((wider, again))
 }
 
 /// The whole fit of one point set, stage by stage.
@@ -563,8 +578,8 @@ fn fit_counting(
             // absorbed: 6.99 against 4.20 % on the AdelaideRMF homography pairs.) Motion
             // subspaces are not trained with outliers and drop a structure that shrinks.
             if let Some(k) = given.filter(|&k| r.outliers && k < read) {
-                let wider = cluster(model, &embedding, &params.with_fixed_k(k + 1)?)?;
-                let again = refine(model, points, &wider, r);
+                let (wider, again) =
+                    refine_one_more(model, points, &embedding, params, &clustering, r)?;
                 let found = again.structures.len();
                 if found <= k && found >= refined.structures.len() {
                     clustering = both_ks(&clustering, wider);

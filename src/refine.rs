@@ -378,17 +378,20 @@ pub fn refine_on(
             }
             (current, moved) = (next, true);
             // The groups whose points changed, refitted side by side with their model's type.
-            let mut changed: Vec<(usize, Vec<usize>, Model)> = groups
+            let mut changed: Vec<(usize, Vec<usize>)> = groups
                 .iter()
                 .enumerate()
                 .filter_map(|(j, slot)| {
                     let g = slot.as_ref().filter(|g| !g.frozen)?;
                     let idx = members(&current, j);
-                    (idx != g.fitted_on).then_some((j, idx, g.fit.model.clone()))
+                    (idx != g.fitted_on).then_some((j, idx))
                 })
                 .collect();
-            let fits = threads.map(&mut changed, |(_, idx, model)| refit_same_type(idx, model));
-            for ((j, idx, _), fit) in changed.into_iter().zip(fits) {
+            let fits = threads.map(&mut changed, |(j, idx)| match &groups[*j] {
+                Some(g) => refit_same_type(idx, &g.fit.model),
+                None => fit_on(idx),
+            });
+            for ((j, idx), fit) in changed.into_iter().zip(fits) {
                 let slot = &mut groups[j];
                 let Some(g) = slot else { continue };
                 let shrunk = 2 * idx.len() < g.start && !keep_shrunk;
@@ -405,24 +408,23 @@ pub fn refine_on(
         // The type of each structure, chosen again on its settled points (unmoved groups keep
         // their first fit, which was chosen on the same points). A group refitted on exactly
         // those points in the last round brings that fit as its own type's candidate.
-        let mut settled: Vec<(usize, Vec<usize>, Option<geometry::Fit>)> = groups
+        let mut settled: Vec<(usize, Vec<usize>)> = groups
             .iter()
             .enumerate()
             .filter_map(|(j, slot)| {
                 let g = slot.as_ref().filter(|g| moved && !g.frozen)?;
                 let idx = members(&current, j);
-                let same = idx == g.fitted_on;
-                (!g.type_chosen || !same).then(|| (j, idx, same.then(|| g.fit.clone())))
+                (!g.type_chosen || idx != g.fitted_on).then_some((j, idx))
             })
             .collect();
-        let fits = threads.map(&mut settled, |(_, idx, known)| match known {
-            Some(known) => {
+        let fits = threads.map(&mut settled, |(j, idx)| match &groups[*j] {
+            Some(g) if *idx == g.fitted_on => {
                 let rows: Vec<&[f64]> = idx.iter().map(|&i| points.row(i)).collect();
-                geometry::fit_knowing(family, &rows, known)
+                geometry::fit_knowing(family, &rows, &g.fit)
             }
-            None => fit_on(idx),
+            _ => fit_on(idx),
         });
-        for ((j, idx, _), fit) in settled.into_iter().zip(fits) {
+        for ((j, idx), fit) in settled.into_iter().zip(fits) {
             let Some(g) = groups[j].as_mut() else {
                 continue;
             };

@@ -172,6 +172,12 @@ impl ImageSize {
         ))
     }
 
+    /// [`ImageSize::second_view_move`] for `points` that have a second view (correspondences).
+    fn move_for(&self, points: &PointSet) -> Option<(f64, [f64; 2])> {
+        self.second_view_move()
+            .filter(|_| points.kind() == Kind::Correspondences)
+    }
+
     /// `points` with a distinct second view's coordinates carried into the first image's frame
     /// (its centre to the first's centre, its longer side to the first's longer side), and the
     /// first image's size: the one frame the network, its symmetries and its neighbour
@@ -181,10 +187,7 @@ impl ImageSize {
             second: None,
             ..self
         };
-        let Some((scale, shift)) = self
-            .second_view_move()
-            .filter(|_| points.kind() == Kind::Correspondences)
-        else {
+        let Some((scale, shift)) = self.move_for(points) else {
             return (Cow::Borrowed(points), first);
         };
         match points.second_view_mapped(|a, v| v * scale + shift[a]) {
@@ -197,10 +200,7 @@ impl ImageSize {
     /// Whether [`ImageSize::in_first_frame`] keeps `points` within the accepted coordinates
     /// (always, for one size), without moving them.
     pub fn moves_in_range(&self, points: &PointSet) -> bool {
-        let Some((scale, shift)) = self
-            .second_view_move()
-            .filter(|_| points.kind() == Kind::Correspondences)
-        else {
+        let Some((scale, shift)) = self.move_for(points) else {
             return true;
         };
         (0..points.len()).all(|i| {
