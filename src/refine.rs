@@ -486,10 +486,14 @@ fn assign(
     (threshold, stay): (f64, f64),
     threads: &Threads,
 ) -> Vec<i64> {
-    let live: Vec<(usize, &Model)> = groups
+    let live: Vec<(usize, geometry::Prepared)> = groups
         .iter()
         .enumerate()
-        .filter_map(|(j, g)| g.as_ref().filter(|g| !g.frozen).map(|g| (j, &g.fit.model)))
+        .filter_map(|(j, g)| {
+            g.as_ref()
+                .filter(|g| !g.frozen)
+                .map(|g| (j, g.fit.model.prepared()))
+        })
         .collect();
     threads.map_n(points.len(), |i| {
         let here = current[i];
@@ -511,7 +515,7 @@ fn assign(
         }
         let (j, r) = live
             .iter()
-            .map(|&(j, m)| (j, m.residual(row)))
+            .map(|(j, m)| (*j, m.residual(row)))
             .min_by(|a, b| a.1.total_cmp(&b.1))
             .unwrap_or((live[0].0, f64::INFINITY));
         if outliers && (r.is_nan() || r > threshold) {
@@ -549,7 +553,7 @@ fn merge(
             .collect();
         // Whether the model of group `a` explains at least half of group `b`'s points.
         let explains = |a: usize, b: usize| {
-            let Some(model) = groups[a].as_ref().map(|g| &g.fit.model) else {
+            let Some(model) = groups[a].as_ref().map(|g| g.fit.model.prepared()) else {
                 return false;
             };
             let (mut within, mut all) = (0usize, 0usize);
@@ -619,9 +623,10 @@ fn answer(points: &PointSet, current: Vec<i64>, groups: Vec<Option<Group>>, sigm
         let rms = if g.frozen {
             0.0
         } else {
+            let model = g.fit.model.prepared();
             let ss: f64 = idx
                 .iter()
-                .map(|&i| g.fit.model.residual(points.row(i)).powi(2))
+                .map(|&i| model.residual(points.row(i)).powi(2))
                 .sum();
             (ss / idx.len() as f64).sqrt()
         };

@@ -222,11 +222,19 @@ fn foot_from(a: f64, b: f64, px: f64, py: f64, start: (f64, f64)) -> Option<(f64
             return None;
         }
         (c, s) = (nc / t, ns / t);
-        if step.abs() < 1e-12 {
+        if step.abs() < 1e-7 {
             return Some((c, s));
         }
     }
     None
+}
+
+/// The point's own elliptic angle (x/a, y/b) normalised, when the point is near the curve.
+fn near_start(a: f64, b: f64, px: f64, py: f64) -> Option<(f64, f64)> {
+    let (x, y) = (px / a, py / b);
+    let t = norm2(x, y);
+    let gradient = 2.0 * norm2(x / a, y / b);
+    (t > 0.0 && (t * t - 1.0).abs() < 0.25 * (b * b / a) * gradient).then(|| (x / t, y / t))
 }
 
 /// Most Newton steps of a warm-started foot ([`foot_from`]).
@@ -303,7 +311,7 @@ fn foot_first_quadrant(a: f64, b: f64, px: f64, py: f64) -> (f64, f64) {
 }
 
 /// An ellipse prepared for distance queries: the frame's rotation computed once.
-struct EllipseFrame {
+pub(crate) struct EllipseFrame {
     cx: f64,
     cy: f64,
     /// Semi-axes with a ≥ b (swapped from the parameters if needed).
@@ -316,7 +324,7 @@ struct EllipseFrame {
 
 impl EllipseFrame {
     /// `None` for a non-positive axis or non-finite parameters.
-    fn new(e: &EllipseParams) -> Option<Self> {
+    pub(crate) fn new(e: &EllipseParams) -> Option<Self> {
         let [cx, cy, a0, b0, theta] = *e;
         if !(a0 > 0.0 && b0 > 0.0 && e.iter().all(|v| v.is_finite())) {
             return None;
@@ -368,6 +376,7 @@ impl EllipseFrame {
         let (px, py) = (u.abs(), v.abs());
         let first = foot
             .and_then(|start| foot_from(a, b, px, py, start))
+            .or_else(|| near_start(a, b, px, py).and_then(|start| foot_from(a, b, px, py, start)))
             .unwrap_or_else(|| foot_first_quadrant(a, b, px, py));
         *foot = Some(first);
         let (cphi, sphi) = (first.0.copysign(u), first.1.copysign(v));
@@ -405,25 +414,30 @@ impl EllipseFrame {
 
 /// Signed distance of (x, y) to the ellipse (positive outside) and its gradient with respect to
 /// (cx, cy, a, b, θ). `None` for a non-positive axis or non-finite input.
+#[cfg(test)]
 fn ellipse_signed_distance(e: &EllipseParams, x: f64, y: f64) -> Option<(f64, [f64; 5])> {
     EllipseFrame::new(e)?.signed(x, y)
 }
 
-/// min([`ellipse_distance`], `cap`); a point whose first-order (Sampson) distance exceeds
-/// 2 × `cap` is far from the curve and gets `cap` without the foot-point search.
-pub fn ellipse_distance_capped(e: &EllipseParams, x: f64, y: f64, cap: f64) -> f64 {
-    let Some(frame) = EllipseFrame::new(e) else {
-        return f64::INFINITY;
-    };
-    if frame.sampson(x, y) > 2.0 * cap {
-        return cap;
+impl EllipseFrame {
+    /// Distance of (x, y) to the ellipse; INFINITY where undefined.
+    pub(crate) fn distance(&self, x: f64, y: f64) -> f64 {
+        self.signed(x, y).map_or(f64::INFINITY, |(d, _)| d.abs())
     }
-    frame.signed(x, y).map_or(cap, |(d, _)| d.abs().min(cap))
+
+    /// min([`EllipseFrame::distance`], `cap`); a point whose first-order (Sampson) distance
+    /// exceeds 2 × `cap` is far from the curve and gets `cap` without the foot-point search.
+    pub(crate) fn distance_capped(&self, x: f64, y: f64, cap: f64) -> f64 {
+        if self.sampson(x, y) > 2.0 * cap {
+            return cap;
+        }
+        self.signed(x, y).map_or(cap, |(d, _)| d.abs().min(cap))
+    }
 }
 
 /// Distance of (x, y) to the ellipse; INFINITY for invalid parameters.
 pub fn ellipse_distance(e: &EllipseParams, x: f64, y: f64) -> f64 {
-    ellipse_signed_distance(e, x, y).map_or(f64::INFINITY, |(d, _)| d.abs())
+    EllipseFrame::new(e).map_or(f64::INFINITY, |f| f.distance(x, y))
 }
 
 /// The ellipse of the conic A x² + B xy + C y² + D x + E y + F = 0, or `None` when it is not a
@@ -547,38 +561,39 @@ impl Estimator for EllipseEstimator {
     }
 
     fn refine(&self, e: EllipseParams, points: &[[f64; 2]], weights: &[f64]) -> EllipseParams {
-        let Some(t) = Similarity::hartley(points.iter().copied().zip(weights.iter().copied()))
-        else {
-            return e;
+        refine_ellipse(e, points, weights).map_or(e, |r| r.params)
+    }
+
+    /// The residuals after the refinement start each point's foot search from its foot at the
+    /// refinement's last evaluation.
+    fn refine_residuals(
+        &self,
+        e: EllipseParams,
+        points: &[[f64; 2]],
+        weights: &[f64],
+    ) -> (EllipseParams, Vec<f64>) {
+        let Some(r) = refine_ellipse(e, points, weights) else {
+            return (e, self.residuals(&e, points));
         };
-        let problem = EllipseProblem {
-            points: points.iter().map(|p| t.apply(*p)).collect(),
-            weights: weights.to_vec(),
-            feet: std::cell::RefCell::new(Feet::new(points.len())),
+        let Some(frame) = EllipseFrame::new(&r.state) else {
+            return (r.params, self.residuals(&r.params, points));
         };
-        let start = [
-            t.k * (e[0] - t.mx),
-            t.k * (e[1] - t.my),
-            t.k * e[2],
-            t.k * e[3],
-            e[4],
-        ];
-        let Some(m) = minimise(&problem, start, REFINE_EVALUATIONS).filter(|m| m.improved) else {
-            return e;
-        };
-        let s = m.state;
-        let (a, b, theta) = if s[3] > s[2] {
-            (s[3], s[2], s[4] + FRAC_PI_2)
-        } else {
-            (s[2], s[3], s[4])
-        };
-        [
-            t.mx + s[0] / t.k,
-            t.my + s[1] / t.k,
-            a / t.k,
-            b / t.k,
-            normalise_angle(theta),
-        ]
+        let mut feet = r.problem.feet.into_inner();
+        if feet.swapped != frame.swapped {
+            feet.at.iter_mut().for_each(|f| *f = None);
+        }
+        let res = r
+            .problem
+            .points
+            .iter()
+            .zip(feet.at.iter_mut())
+            .map(|(p, foot)| {
+                frame
+                    .signed_warm(p[0], p[1], foot)
+                    .map_or(f64::INFINITY, |(d, _)| d.abs() / r.k)
+            })
+            .collect();
+        (r.params, res)
     }
 
     fn residual(&self, e: &EllipseParams, p: &[f64; 2]) -> f64 {
@@ -609,6 +624,65 @@ impl Estimator for EllipseEstimator {
         };
         points.iter().map(|p| frame.sampson(p[0], p[1])).collect()
     }
+}
+
+/// An ellipse's geometric refinement ([`EllipseProblem`] in the points' Hartley frame).
+struct RefinedEllipse {
+    /// Caller's units: the refined ellipse, or the start where the refinement did not improve it.
+    params: EllipseParams,
+    /// The same ellipse in the Hartley frame, and that frame's scale.
+    state: EllipseParams,
+    k: f64,
+    /// The problem, its feet those of the last evaluation.
+    problem: EllipseProblem,
+}
+
+/// Levenberg–Marquardt on the orthogonal distances of the points of positive weight, from `e`;
+/// `None` when the points have no Hartley frame.
+fn refine_ellipse(
+    e: EllipseParams,
+    points: &[[f64; 2]],
+    weights: &[f64],
+) -> Option<RefinedEllipse> {
+    let t = Similarity::hartley(points.iter().copied().zip(weights.iter().copied()))?;
+    let problem = EllipseProblem {
+        points: points.iter().map(|p| t.apply(*p)).collect(),
+        weights: weights.to_vec(),
+        feet: std::cell::RefCell::new(Feet::new(points.len())),
+    };
+    let start = [
+        t.k * (e[0] - t.mx),
+        t.k * (e[1] - t.my),
+        t.k * e[2],
+        t.k * e[3],
+        e[4],
+    ];
+    let Some(m) = minimise(&problem, start, REFINE_EVALUATIONS).filter(|m| m.improved) else {
+        return Some(RefinedEllipse {
+            params: e,
+            state: start,
+            k: t.k,
+            problem,
+        });
+    };
+    let s = m.state;
+    let (a, b, theta) = if s[3] > s[2] {
+        (s[3], s[2], s[4] + FRAC_PI_2)
+    } else {
+        (s[2], s[3], s[4])
+    };
+    Some(RefinedEllipse {
+        params: [
+            t.mx + s[0] / t.k,
+            t.my + s[1] / t.k,
+            a / t.k,
+            b / t.k,
+            normalise_angle(theta),
+        ],
+        state: s,
+        k: t.k,
+        problem,
+    })
 }
 
 /// Σ w d², d the signed orthogonal distance; state (cx, cy, a, b, θ), normalised coordinates.
@@ -809,6 +883,31 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn residuals_after_refinement_match_those_from_scratch() {
+        // The refinement's residuals start each foot search from the last evaluation's foot;
+        // they must equal the residuals of the refined ellipse computed from scratch, inliers
+        // (weight 1) and foreign points (weight 0) alike.
+        let mut rng = Rng::new(11);
+        let truth = [0.4, -0.3, 2.0, 0.8, 0.6];
+        let rows = ellipse_rows(&mut rng, truth, 200, 0.0, 5.0, 0.05, 40);
+        let points: Vec<[f64; 2]> = rows.iter().map(|r| [r[0], r[1]]).collect();
+        let weights: Vec<f64> = (0..points.len())
+            .map(|i| if i < 200 { 1.0 } else { 0.0 })
+            .collect();
+        let start = [0.5, -0.2, 1.8, 0.9, 0.5];
+        let (refined, warm) = EllipseEstimator.refine_residuals(start, &points, &weights);
+        assert_eq!(refined, EllipseEstimator.refine(start, &points, &weights));
+        let cold = EllipseEstimator.residuals(&refined, &points);
+        for (w, c) in warm.iter().zip(&cold) {
+            assert!((w - c).abs() <= 1e-9 * c.max(1.0), "{w} against {c}");
+        }
+        assert!(
+            warm[..200].iter().all(|&r| r < 0.5),
+            "the refined ellipse fits its points"
+        );
     }
 
     #[test]

@@ -112,6 +112,67 @@ pub enum Model {
     },
 }
 
+/// A [`Model`] prepared for the residuals of many rows ([`Model::prepared`]).
+pub struct Prepared<'a> {
+    model: &'a Model,
+    how: Prepare,
+}
+
+/// What a model's residuals share: the ellipse's frame, the map with its inverse (`None` where
+/// the parameters give none: every residual is then infinite).
+enum Prepare {
+    Ellipse(Option<conic::EllipseFrame>),
+    Map(Option<homography::Homography>),
+    AsIs,
+}
+
+impl Prepared<'_> {
+    /// [`Model::residual`].
+    pub fn residual(&self, row: &[f64]) -> f64 {
+        if row.iter().any(|v| !v.is_finite()) {
+            return f64::INFINITY;
+        }
+        let pair =
+            || -> Option<[f64; 4]> { (row.len() == 4).then(|| [row[0], row[1], row[2], row[3]]) };
+        let r = match (&self.how, self.model) {
+            (Prepare::Ellipse(frame), _) if row.len() == 2 => frame
+                .as_ref()
+                .map_or(f64::INFINITY, |f| f.distance(row[0], row[1])),
+            (Prepare::Map(map), _) => match (map, pair()) {
+                (Some(h), Some(p)) => homography::transfer_distance(h, &p),
+                _ => f64::INFINITY,
+            },
+            (_, Model::Line { a, b, c }) if row.len() == 2 => {
+                line::distance(*a, *b, *c, row[0], row[1])
+            }
+            (_, Model::Circle { cx, cy, r }) if row.len() == 2 => {
+                conic::circle_distance(*cx, *cy, *r, row[0], row[1])
+            }
+            (_, Model::Fundamental { f }) => {
+                pair().map_or(f64::INFINITY, |p| fundamental::sampson_distance(f, &p))
+            }
+            (_, Model::Subspace { mean, basis, .. }) => {
+                subspace::subspace_distance(mean, basis, row)
+            }
+            _ => f64::INFINITY,
+        };
+        if r.is_nan() { f64::INFINITY } else { r }
+    }
+
+    /// min([`Model::residual`], `cap`), cheaper for an ellipse: a row whose first-order
+    /// (Sampson) distance exceeds 2 × `cap` is far from the curve and gets `cap` without its
+    /// orthogonal distance (which an iterative foot-point search gives).
+    pub fn residual_capped(&self, row: &[f64], cap: f64) -> f64 {
+        let r = match &self.how {
+            Prepare::Ellipse(frame) if row.len() == 2 && row.iter().all(|v| v.is_finite()) => frame
+                .as_ref()
+                .map_or(f64::INFINITY, |f| f.distance_capped(row[0], row[1], cap)),
+            _ => self.residual(row),
+        };
+        if r.is_nan() { cap } else { r.min(cap) }
+    }
+}
+
 impl Model {
     /// The model of a correspondence fitted with its second view moved by x' = s·x + t, in the
     /// second view's own coordinates x = (x' − t) / s, A = [[s, 0, tx], [0, s, ty], [0, 0, 1]]:
@@ -173,63 +234,33 @@ impl Model {
     /// module docs): points2d rows `[x, y]`, correspondence rows `[x1, y1, x2, y2]`, trajectory
     /// rows of 2F values. `f64::INFINITY` for `Degenerate`, for a row of the wrong width or with a
     /// non-finite value, and wherever the distance is undefined (a point mapped to infinity, a
-    /// singular H); never NaN.
+    /// singular H); never NaN. For many rows, [`Model::prepared`] does the per-model work once.
     pub fn residual(&self, row: &[f64]) -> f64 {
-        if row.iter().any(|v| !v.is_finite()) {
-            return f64::INFINITY;
-        }
-        let pair =
-            || -> Option<[f64; 4]> { (row.len() == 4).then(|| [row[0], row[1], row[2], row[3]]) };
-        let r = match self {
-            Model::Line { a, b, c } if row.len() == 2 => line::distance(*a, *b, *c, row[0], row[1]),
-            Model::Circle { cx, cy, r } if row.len() == 2 => {
-                conic::circle_distance(*cx, *cy, *r, row[0], row[1])
-            }
-            Model::Ellipse {
-                cx,
-                cy,
-                a,
-                b,
-                theta,
-            } if row.len() == 2 => {
-                conic::ellipse_distance(&[*cx, *cy, *a, *b, *theta], row[0], row[1])
-            }
-            Model::Homography { h } => match (homography::from_wire(h), pair()) {
-                (Some(h), Some(p)) => homography::transfer_distance(&h, &p),
-                _ => f64::INFINITY,
-            },
-            Model::Affine { a } => match (homography::affine_from_wire(a), pair()) {
-                (Some(h), Some(p)) => homography::transfer_distance(&h, &p),
-                _ => f64::INFINITY,
-            },
-            Model::Fundamental { f } => {
-                pair().map_or(f64::INFINITY, |p| fundamental::sampson_distance(f, &p))
-            }
-            Model::Subspace { mean, basis, .. } => subspace::subspace_distance(mean, basis, row),
-            _ => f64::INFINITY,
-        };
-        if r.is_nan() { f64::INFINITY } else { r }
+        self.prepared().residual(row)
     }
 
-    /// min([`Model::residual`], `cap`), cheaper for an ellipse: a row whose first-order
-    /// (Sampson) distance exceeds 2 × `cap` is far from the curve and gets `cap` without its
-    /// orthogonal distance (which an iterative foot-point search gives).
+    /// min([`Model::residual`], `cap`), cheaper for an ellipse: see [`Prepared::residual_capped`].
     pub fn residual_capped(&self, row: &[f64], cap: f64) -> f64 {
-        let r = match self {
+        self.prepared().residual_capped(row, cap)
+    }
+
+    /// The model prepared for the residuals of many rows: an ellipse's frame and a map's
+    /// inverse computed once, not per row.
+    pub fn prepared(&self) -> Prepared<'_> {
+        let how = match self {
             Model::Ellipse {
                 cx,
                 cy,
                 a,
                 b,
                 theta,
-            } if row.len() == 2 && row.iter().all(|v| v.is_finite()) => {
-                conic::ellipse_distance_capped(&[*cx, *cy, *a, *b, *theta], row[0], row[1], cap)
-            }
-            _ => self.residual(row),
+            } => Prepare::Ellipse(conic::EllipseFrame::new(&[*cx, *cy, *a, *b, *theta])),
+            Model::Homography { h } => Prepare::Map(homography::from_wire(h)),
+            Model::Affine { a } => Prepare::Map(homography::affine_from_wire(a)),
+            _ => Prepare::AsIs,
         };
-        if r.is_nan() { cap } else { r.min(cap) }
+        Prepared { model: self, how }
     }
-
     /// The number of rows that determine a model of this type: line 2, circle 3, ellipse 5,
     /// homography 4, affine 3, fundamental 8, subspace rank + 1; 0 for `Degenerate`.
     pub fn min_points(&self) -> usize {

@@ -55,6 +55,18 @@ pub trait Estimator {
     /// least-squares fit is already geometric).
     fn refine(&self, params: Self::Params, points: &[Self::Point], weights: &[f64])
     -> Self::Params;
+    /// [`Estimator::refine`], then the refined model's [`Estimator::residuals`] of every point
+    /// (override where the refinement leaves work that makes them cheaper).
+    fn refine_residuals(
+        &self,
+        params: Self::Params,
+        points: &[Self::Point],
+        weights: &[f64],
+    ) -> (Self::Params, Vec<f64>) {
+        let refined = self.refine(params, points, weights);
+        let res = self.residuals(&refined, points);
+        (refined, res)
+    }
     /// Geometric distance of one point, caller's units; `f64::INFINITY` where undefined.
     fn residual(&self, params: &Self::Params, point: &Self::Point) -> f64;
     /// A cheaper stand-in for [`Estimator::residual`], good near the model, for the
@@ -260,8 +272,8 @@ pub fn refine_robust<E: Estimator>(
             .iter()
             .map(|&v| if v { 1.0 } else { 0.0 })
             .collect();
-        let refined = est.refine(current.params.clone(), points, &w01);
-        let next = evaluate(est, refined, points, scale);
+        let (refined, res) = est.refine_residuals(current.params.clone(), points, &w01);
+        let next = evaluated(refined, no_nan(res), scale);
         let same = next.inliers == current.inliers;
         current = next;
         if same {
@@ -310,6 +322,11 @@ pub fn evaluate<E: Estimator>(
     scale: f64,
 ) -> Robust<E::Params> {
     let res = residuals(est, &params, points);
+    evaluated(params, res, scale)
+}
+
+/// [`evaluate`] with the residuals given.
+fn evaluated<P>(params: P, res: Vec<f64>, scale: f64) -> Robust<P> {
     let sigma = robust_sigma(&res, sigma_floor(scale));
     let inliers = inlier_mask(&res, sigma);
     finish(params, res, sigma, inliers)

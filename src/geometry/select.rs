@@ -409,7 +409,10 @@ pub fn fit_family_knowing(family: Family, rows: &[&[f64]], known: Option<&Fit>) 
                     Some(f) => Some(Ok(Candidate {
                         name: f.model.type_name(),
                         fit: f.clone(),
-                        distances: rows.iter().map(|r| f.model.residual(r)).collect(),
+                        distances: {
+                            let model = f.model.prepared();
+                            rows.iter().map(|r| model.residual(r)).collect()
+                        },
                     })),
                     None => curve(name, &pts),
                 }

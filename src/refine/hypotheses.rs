@@ -51,6 +51,8 @@ pub const GROW_ROUNDS: usize = 2;
 pub const MIN_GAIN: f64 = 2.0;
 /// Most swaps per fit.
 pub const MAX_SWAPS: usize = 12;
+/// Neighbourhoods whose hypotheses are grown side by side, per thread.
+pub const CHUNK_PER_THREAD: usize = 2;
 /// Points the proposals and the choice see at most.
 pub const MAX_ROWS: usize = 500;
 
@@ -85,6 +87,7 @@ pub fn swaps(
     let rows = seen_rows(points.len());
     let tau2 = threshold * threshold;
     let cost_row = |model: &Model| -> Vec<f64> {
+        let model = model.prepared();
         rows.iter()
             .map(|&i| model.residual_capped(points.row(i), threshold).powi(2))
             .collect()
@@ -161,9 +164,8 @@ fn seen_rows(n: usize) -> Vec<usize> {
 
 /// Hypotheses of every type of `family`, each fitted on one neighbourhood of the `rows` of
 /// `points` and grown within `threshold`. A neighbourhood that a hypothesis of the same type
-/// already explains gives none (it would give that one again). On one thread the hypotheses are
-/// grown as the search goes, only where needed; on more, every neighbourhood's are grown side
-/// by side first, and the same ones kept.
+/// already explains gives none (it would give that one again). The hypotheses are the same on
+/// any number of threads.
 fn propose(
     points: &PointSet,
     rows: &[usize],
@@ -179,29 +181,36 @@ fn propose(
     let anchors = ANCHORS.min(rows.len());
     let hood_of = |a: usize| neighbourhood(points, rows, rows[a * rows.len() / anchors], size);
     let hoods: Vec<Vec<usize>> = threads.map_n(anchors, hood_of);
-    let mut grown: Option<Vec<Option<Model>>> = (threads.count() > 1).then(|| {
-        threads.map_n(anchors * types.len(), |j| {
-            let (a, t) = (j / types.len(), j % types.len());
-            grow(points, rows, types[t], &hoods[a], threshold)
-        })
-    });
-    let mut out: Vec<Model> = Vec::new();
-    for (a, hood) in hoods.iter().enumerate() {
-        for (t, name) in types.iter().enumerate() {
-            let known = out.iter().any(|m| {
-                m.type_name() == *name
-                    && hood
-                        .iter()
-                        .all(|&i| m.residual_capped(points.row(i), threshold) < threshold)
-            });
-            if known {
-                continue;
+    let known = |out: &[Model], hood: &[usize], name: &str| {
+        out.iter().any(|m| {
+            m.type_name() == name && {
+                let m = m.prepared();
+                hood.iter()
+                    .all(|&i| m.residual_capped(points.row(i), threshold) < threshold)
             }
-            let model = match &mut grown {
-                Some(grown) => grown[a * types.len() + t].take(),
-                None => grow(points, rows, name, hood, threshold),
-            };
-            out.extend(model);
+        })
+    };
+    // Neighbourhoods in chunks: the hypotheses no earlier one explains are grown side by side,
+    // then taken in order, each again only if none taken before it explains its neighbourhood
+    // (what one pass in order would take; on more threads a few are grown and not taken).
+    let chunk = if threads.count() > 1 {
+        CHUNK_PER_THREAD * threads.count()
+    } else {
+        1
+    };
+    let mut out: Vec<Model> = Vec::new();
+    for first in (0..anchors).step_by(chunk) {
+        let mut todo: Vec<(usize, usize)> = (first..(first + chunk).min(anchors))
+            .flat_map(|a| (0..types.len()).map(move |t| (a, t)))
+            .filter(|&(a, t)| !known(&out, &hoods[a], types[t]))
+            .collect();
+        let grown = threads.map(&mut todo, |&mut (a, t)| {
+            grow(points, rows, types[t], &hoods[a], threshold)
+        });
+        for ((a, t), model) in todo.into_iter().zip(grown) {
+            if !known(&out, &hoods[a], types[t]) {
+                out.extend(model);
+            }
         }
     }
     out
@@ -253,6 +262,7 @@ fn grow(
 
 /// The `rows` closer than `threshold` to `model`.
 fn explained(points: &PointSet, rows: &[usize], model: &Model, threshold: f64) -> Vec<usize> {
+    let model = model.prepared();
     rows.iter()
         .copied()
         .filter(|&i| model.residual_capped(points.row(i), threshold) < threshold)
