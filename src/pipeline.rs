@@ -707,11 +707,12 @@ pub fn fit_seen(
     window.place(points, visibility, &complete, &mut placed)?;
     for s in &mut outcome.structures {
         // A partly seen track's distance over the frames it was seen in.
+        let prepared = s.model.prepared();
         let distance = |i: usize| match &s.model {
             Model::Subspace { mean, basis, .. } if !visibility.throughout(i) => {
                 masked_subspace_distance(mean, basis, points.row(i), visibility.seen(i))
             }
-            model => model.residual(points.row(i)),
+            _ => prepared.residual(points.row(i)),
         };
         let distances: Vec<f64> = (0..points.len())
             .filter(|&i| placed.labels[i] == s.label as i64)

@@ -202,10 +202,15 @@ pub fn circle_model(c: [f64; 3]) -> Model {
 /// An ellipse: centre, semi-axes a ≥ b > 0, θ the angle of the a-axis from +x.
 pub type EllipseParams = [f64; 5];
 
-/// Newton steps on g(φ) from a foot known to be close (the previous evaluation's, while
-/// Levenberg–Marquardt moves the ellipse a little), in the first quadrant: the foot once a step
-/// moves it by less than 1e-12 rad, or `None` (not converged in [`WARM_STEPS`], or a step
-/// undefined) for the full search.
+/// Newton steps on g(φ) from a start thought close, in the first quadrant: the point's foot at
+/// an earlier evaluation while Levenberg–Marquardt moves the ellipse a little (or at its last
+/// evaluation, for the residuals that follow it), or the point's own elliptic angle when it
+/// lies near the curve ([`near_start`]). The foot once a step moves it by less than 1e-7 rad
+/// (Newton converges quadratically: what is left is about 1e-14 rad, and the distance, which the
+/// foot minimises, is exact to rounding); `None` (not converged in [`WARM_STEPS`], or a step
+/// undefined) for the full search. A point off the axes has one stationary foot in the open
+/// first quadrant, the nearest; `dg > 0` turns away the maxima on the axes, so a run that
+/// converges has found the nearest foot.
 fn foot_from(a: f64, b: f64, px: f64, py: f64, start: (f64, f64)) -> Option<(f64, f64)> {
     let c2 = a * a - b * b;
     let (mut c, mut s) = start;
@@ -229,7 +234,8 @@ fn foot_from(a: f64, b: f64, px: f64, py: f64, start: (f64, f64)) -> Option<(f64
     None
 }
 
-/// The point's own elliptic angle (x/a, y/b) normalised, when the point is near the curve.
+/// The point's own elliptic angle (x/a, y/b) normalised, when the point is near the curve:
+/// its first-order (Sampson) distance below a quarter of the smallest radius of curvature, b²/a.
 fn near_start(a: f64, b: f64, px: f64, py: f64) -> Option<(f64, f64)> {
     let (x, y) = (px / a, py / b);
     let t = norm2(x, y);
@@ -244,15 +250,10 @@ const WARM_STEPS: usize = 4;
 /// x²/a² + y²/b² = 1 (a ≥ b > 0, ellipse frame): (cos φ, sin φ) of the foot (a cos φ, b sin φ).
 fn foot_first_quadrant(a: f64, b: f64, px: f64, py: f64) -> (f64, f64) {
     let c2 = a * a - b * b;
-    // Near the curve (Sampson distance below a quarter of the smallest radius of curvature,
-    // b²/a), start from the point's own elliptic angle (exact on the curve) and one evolute
-    // step; elsewhere from 45° and three (the evolute method's own start).
-    let (x, y) = (px / a, py / b);
-    let t = norm2(x, y);
-    let gradient = 2.0 * norm2(x / a, y / b);
-    let near = t > 0.0 && (t * t - 1.0).abs() < 0.25 * (b * b / a) * gradient;
-    let (mut c, mut s, iterations) = if near {
-        (x / t, y / t, 1)
+    // Near the curve ([`near_start`]), start from the point's own elliptic angle (exact on the
+    // curve) and one evolute step; elsewhere from 45° and three (the evolute method's own start).
+    let (mut c, mut s, iterations) = if let Some((c, s)) = near_start(a, b, px, py) {
+        (c, s, 1)
     } else {
         (
             std::f64::consts::FRAC_1_SQRT_2,
@@ -363,8 +364,10 @@ impl EllipseFrame {
         self.signed_warm(x, y, &mut None)
     }
 
-    /// [`EllipseFrame::signed`], its foot searched from `foot` (first quadrant) when that is
-    /// given and the Newton steps converge, and `foot` then set to the one found.
+    /// [`EllipseFrame::signed`], its foot searched ([`foot_from`]) from `foot` (first quadrant)
+    /// when that is given, else from the point's elliptic angle when it lies near the curve,
+    /// else (or when those Newton steps do not converge) by the full search; `foot` is then set
+    /// to the one found.
     fn signed_warm(
         &self,
         x: f64,
@@ -887,27 +890,90 @@ mod tests {
 
     #[test]
     fn residuals_after_refinement_match_those_from_scratch() {
-        // The refinement's residuals start each foot search from the last evaluation's foot;
-        // they must equal the residuals of the refined ellipse computed from scratch, inliers
-        // (weight 1) and foreign points (weight 0) alike.
+        // The refinement's residuals start each foot search from the last evaluation's foot, in
+        // the points' Hartley frame; they must equal the residuals of the refined ellipse
+        // computed from scratch in the caller's units, inliers (weight 1) and foreign points
+        // (weight 0) alike: data far from the origin and of large size (Hartley scale far from
+        // 1), a start whose second axis is the longer (the frame swaps its axes), and a start
+        // already at the optimum (nothing to improve).
         let mut rng = Rng::new(11);
-        let truth = [0.4, -0.3, 2.0, 0.8, 0.6];
-        let rows = ellipse_rows(&mut rng, truth, 200, 0.0, 5.0, 0.05, 40);
+        let truth = [1000.4, -700.3, 200.0, 80.0, 0.6];
+        let rows = ellipse_rows(&mut rng, truth, 200, 0.0, 5.0, 5.0, 40);
         let points: Vec<[f64; 2]> = rows.iter().map(|r| [r[0], r[1]]).collect();
         let weights: Vec<f64> = (0..points.len())
             .map(|i| if i < 200 { 1.0 } else { 0.0 })
             .collect();
-        let start = [0.5, -0.2, 1.8, 0.9, 0.5];
-        let (refined, warm) = EllipseEstimator.refine_residuals(start, &points, &weights);
-        assert_eq!(refined, EllipseEstimator.refine(start, &points, &weights));
-        let cold = EllipseEstimator.residuals(&refined, &points);
-        for (w, c) in warm.iter().zip(&cold) {
-            assert!((w - c).abs() <= 1e-9 * c.max(1.0), "{w} against {c}");
+        let optimum = EllipseEstimator.refine(truth, &points, &weights);
+        let optimum = EllipseEstimator.refine(optimum, &points, &weights);
+        for start in [
+            [1010.0, -690.0, 180.0, 90.0, 0.5],
+            [1010.0, -690.0, 90.0, 180.0, 0.5 - FRAC_PI_2],
+            optimum,
+        ] {
+            let (refined, warm) = EllipseEstimator.refine_residuals(start, &points, &weights);
+            assert_eq!(refined, EllipseEstimator.refine(start, &points, &weights));
+            let cold = EllipseEstimator.residuals(&refined, &points);
+            for (w, c) in warm.iter().zip(&cold) {
+                assert!((w - c).abs() <= 1e-9 * c.max(1.0), "{w} against {c}");
+            }
+            assert!(
+                warm[..200].iter().all(|&r| r < 25.0),
+                "the refined ellipse fits its points"
+            );
         }
-        assert!(
-            warm[..200].iter().all(|&r| r < 0.5),
-            "the refined ellipse fits its points"
+    }
+
+    /// The distance of (x, y) to the ellipse x²/a² + y²/b² = 1 by brute force: dense samples,
+    /// then ternary refinement around the best.
+    fn brute_force_distance(a: f64, b: f64, x: f64, y: f64) -> f64 {
+        let m = 20000;
+        let f = |t: f64| (a * t.cos() - x).hypot(b * t.sin() - y);
+        let (mut best, mut bi) = (f64::INFINITY, 0);
+        for i in 0..m {
+            let d = f(std::f64::consts::TAU * i as f64 / m as f64);
+            if d < best {
+                best = d;
+                bi = i;
+            }
+        }
+        let (mut lo, mut hi) = (
+            std::f64::consts::TAU * (bi as f64 - 1.0) / m as f64,
+            std::f64::consts::TAU * (bi as f64 + 1.0) / m as f64,
         );
+        for _ in 0..100 {
+            let m1 = lo + (hi - lo) / 3.0;
+            let m2 = hi - (hi - lo) / 3.0;
+            if f(m1) < f(m2) { hi = m2 } else { lo = m1 }
+        }
+        f(0.5 * (lo + hi)).min(best)
+    }
+
+    #[test]
+    fn newton_from_any_start_finds_the_nearest_foot_or_gives_up() {
+        // foot_from runs from stale feet (the last evaluation's, an ellipse ago) and from the
+        // point's elliptic angle: whatever the start, it must give the nearest foot or None.
+        let mut rng = Rng::new(23);
+        let mut found = 0;
+        for &(a, b) in &[(1.0, 1.0), (1.5, 1.0), (3.0, 1.0), (20.0, 1.0)] {
+            for _ in 0..400 {
+                let scale = [0.01 * b, 0.3 * b, 3.0 * a][(rng.uniform() * 3.0) as usize % 3];
+                let phi = rng.range(0.0, std::f64::consts::FRAC_PI_2);
+                let px = (a * phi.cos() + scale * rng.normal()).abs();
+                let py = (b * phi.sin() + scale * rng.normal()).abs();
+                let start = rng.range(0.0, std::f64::consts::FRAC_PI_2);
+                let Some((c, s)) = foot_from(a, b, px, py, (start.cos(), start.sin())) else {
+                    continue;
+                };
+                found += 1;
+                let d = (a * c - px).hypot(b * s - py);
+                let exact = brute_force_distance(a, b, px, py);
+                assert!(
+                    (d - exact).abs() <= 1e-9 * b.max(exact),
+                    "a={a} b={b} p=({px},{py}) from {start}: {d} vs {exact}"
+                );
+            }
+        }
+        assert!(found > 400, "most starts converge: {found} of 1600");
     }
 
     #[test]
@@ -924,28 +990,7 @@ mod tests {
                 );
                 let e = [0.0, 0.0, a, b, 0.0];
                 let d = ellipse_distance(&e, x, y);
-                // Brute force: dense samples, then golden refinement around the best.
-                let m = 20000;
-                let (mut best, mut bi) = (f64::INFINITY, 0);
-                for i in 0..m {
-                    let t = std::f64::consts::TAU * i as f64 / m as f64;
-                    let dd = (a * t.cos() - x).hypot(b * t.sin() - y);
-                    if dd < best {
-                        best = dd;
-                        bi = i;
-                    }
-                }
-                let (mut lo, mut hi) = (
-                    std::f64::consts::TAU * (bi as f64 - 1.0) / m as f64,
-                    std::f64::consts::TAU * (bi as f64 + 1.0) / m as f64,
-                );
-                let f = |t: f64| (a * t.cos() - x).hypot(b * t.sin() - y);
-                for _ in 0..100 {
-                    let m1 = lo + (hi - lo) / 3.0;
-                    let m2 = hi - (hi - lo) / 3.0;
-                    if f(m1) < f(m2) { hi = m2 } else { lo = m1 }
-                }
-                let exact = f(0.5 * (lo + hi)).min(best);
+                let exact = brute_force_distance(a, b, x, y);
                 assert!(
                     (d - exact).abs() <= 1e-9 * b.max(exact),
                     "a={a} b={b} p=({x},{y}): {d} vs {exact}"

@@ -207,8 +207,10 @@ fn propose(
         let grown = threads.map(&mut todo, |&mut (a, t)| {
             grow(points, rows, types[t], &hoods[a], threshold)
         });
+        // Only the models taken in this chunk can explain what those before it did not.
+        let before = out.len();
         for ((a, t), model) in todo.into_iter().zip(grown) {
-            if !known(&out, &hoods[a], types[t]) {
+            if !known(&out[before..], &hoods[a], types[t]) {
                 out.extend(model);
             }
         }
