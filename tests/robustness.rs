@@ -109,6 +109,21 @@ fn lce_cells_are_the_eval_of_the_data_they_name() {
     );
     let outliers = cell(&r, "outliers-0.5");
     assert_eq!(outliers["samples"], 2);
+    // Each sample's errors, whose mean is the cell's.
+    for c in r["cells"].as_array().unwrap() {
+        let each = c["per_sample"].as_array().unwrap();
+        assert_eq!(each.len(), 2, "{}", c["name"]);
+        for (key, summary) in [("known_error", "known"), ("chosen_error", "chosen")] {
+            let mean = each.iter().map(|x| x[key].as_f64().unwrap()).sum::<f64>() / 2.0;
+            let cell_mean = c[summary]["mean_error"].as_f64().unwrap();
+            assert!(
+                (mean - cell_mean).abs() < 1e-12,
+                "{}: {mean} vs {cell_mean}",
+                c["name"]
+            );
+        }
+        assert!(each.iter().all(|x| x["chosen_k"].as_u64().unwrap() >= 1));
+    }
     assert_eq!(outliers["mean_k"], 5.0, "the outliers are a fifth group");
     assert_eq!(outliers["mean_points"], 300.0);
     assert_eq!(outliers["factors"]["outliers"], 0.5);

@@ -158,7 +158,23 @@ pub struct CellResult {
     /// Sequences without a sample in this cell (too few frames for the stride).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub skipped: Vec<String>,
+    /// Each sample's errors, in the cell's order: which draws carry a mean.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub per_sample: Vec<SampleResult>,
     pub seconds: f64,
+}
+
+/// One sample of a cell.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SampleResult {
+    pub name: String,
+    /// True number of groups (outliers included).
+    pub k_true: usize,
+    /// Error with the true K.
+    pub known_error: f64,
+    /// Error and K with K chosen by the card's selection.
+    pub chosen_error: f64,
+    pub chosen_k: usize,
 }
 
 /// A whole grid.
@@ -385,6 +401,23 @@ fn evaluate_cell(
     }
     let t = totals(&rows);
     let n = rows.len().max(1) as f64;
+    let per_sample = rows
+        .iter()
+        .map(|r| {
+            let chosen = match selection {
+                Selection::Sod => &r.sod,
+                Selection::Silhouette => &r.silhouette,
+                Selection::Fixed(_) => &r.known,
+            };
+            SampleResult {
+                name: r.name.clone(),
+                k_true: r.k_true,
+                known_error: r.known.error,
+                chosen_error: chosen.error,
+                chosen_k: chosen.k,
+            }
+        })
+        .collect();
     Ok(CellResult {
         name: cell.name,
         group: cell.group.to_string(),
@@ -401,6 +434,7 @@ fn evaluate_cell(
         },
         totals: t,
         skipped: cell.skipped,
+        per_sample,
         seconds: 0.0,
     })
 }
@@ -1198,6 +1232,7 @@ mod tests {
             } else {
                 vec![]
             },
+            per_sample: vec![],
             seconds: 1.0,
         };
         let report = Report {
