@@ -59,7 +59,9 @@
 //!
 //! **Merging.** When K was chosen automatically, two structures whose union one model of the
 //! same family fits with a noise level within [`MERGE_SIGMAS`] × σ are one structure seen twice
-//! (K chosen too high), and merge. Only pairs where each structure's model already explains at
+//! (K chosen too high), and merge (σ at least the joint fit's floor, [`geometry::robust`]'s
+//! σ_floor of the pair's points: on noise-free data every noise level is a floor, and a pair's
+//! floor exceeds each structure's). Only pairs where each structure's model already explains at
 //! least half of the other's points within τ are fitted jointly: a structure seen twice passes,
 //! while two nearby planes or curves that one loose joint fit would hold within 1.5 σ do not. A
 //! K the caller gave is kept. Motion subspaces never merge: an affine subspace of rank up to 4
@@ -574,6 +576,9 @@ fn merge(
                 .map(|i| points.row(i))
                 .collect();
             let fit = geometry::fit(family, &rows);
+            // On noise-free data every fit's σ is the floor set by its points' spread, and a
+            // pair's points spread wider than either structure's: measure against that floor.
+            let sigma = sigma.max(geometry::select::noise_floor(family, &rows));
             let ok = !matches!(fit.model, Model::Degenerate { .. })
                 && fit.sigma <= MERGE_SIGMAS * sigma
                 && fit.inliers.iter().filter(|&&v| v).count() * 10 >= rows.len() * 9;
@@ -1078,6 +1083,32 @@ mod tests {
         assert_eq!(r.structures.len(), 2);
         let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
         assert_eq!(r.labels, want);
+    }
+
+    #[test]
+    fn a_noise_free_curve_split_into_arcs_is_merged() {
+        // Exact points on one circle, in four arcs of 40 points: each arc's fit, and the fit of
+        // two arcs together, leave residuals far below every noise floor, so the pair must merge
+        // although the floor of σ grows with the spread of the points fitted.
+        let values: Vec<f64> = (0..160)
+            .flat_map(|i| {
+                let t = std::f64::consts::TAU * i as f64 / 160.0;
+                [400.0 + 80.0 * t.cos(), 500.0 + 80.0 * t.sin()]
+            })
+            .collect();
+        let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
+        let start: Vec<usize> = (0..160).map(|i| i / 40).collect();
+        let r = refine(
+            &points,
+            &start,
+            4,
+            Family::Curves,
+            &RefineParams::default(),
+            Some(8),
+        );
+        assert_eq!(r.structures.len(), 1, "{:?}", r.structures);
+        assert!(r.labels.iter().all(|&l| l == 0));
+        assert!(finite(&r));
     }
 
     #[test]

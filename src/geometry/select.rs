@@ -119,6 +119,20 @@ fn curve(name: &str, pts: &[[f64; 2]]) -> Option<Result<Candidate, GeometryError
     })
 }
 
+/// The floor under a robust fit's noise level on `rows` of `family`: [`SIGMA_FLOOR`] × the
+/// rows' scale (RMS spread; for correspondences the mean of the two images'), as the fit
+/// applies it; 0 for motion subspaces and rows that are not of the family's width.
+pub fn noise_floor(family: Family, rows: &[&[f64]]) -> f64 {
+    let scale = match family {
+        Family::Curves => points2(rows).map_or(0.0, |p| spread(p.iter().copied())),
+        Family::Homography | Family::Fundamental => {
+            points4(rows).map_or(0.0, |p| two_view_scale(&p))
+        }
+        Family::Subspace => 0.0,
+    };
+    SIGMA_FLOOR * scale
+}
+
 /// The data's scale for two-view rows: the mean of the two images' RMS spreads.
 fn two_view_scale(pts: &[[f64; 4]]) -> f64 {
     0.5 * (spread(pts.iter().map(|p| [p[0], p[1]])) + spread(pts.iter().map(|p| [p[2], p[3]])))
