@@ -659,6 +659,18 @@ mod tests {
 
     /// Two noisy circles of radius 1 and 2 around (0, 0) and (10, 0), `m` points each, with
     /// deterministic noise of about `noise`.
+    /// Curves refined with the default parameters and K chosen (up to 8).
+    fn curves_k_chosen(points: &PointSet, start: &[usize], k: usize) -> Refined {
+        refine(
+            points,
+            start,
+            k,
+            Family::Curves,
+            &RefineParams::default(),
+            Some(8),
+        )
+    }
+
     fn two_circles(m: usize, noise: f64) -> (PointSet, Vec<usize>) {
         let mut values = Vec::new();
         let mut labels = Vec::new();
@@ -818,14 +830,7 @@ mod tests {
         for l in start.iter_mut().step_by(2).take(10) {
             *l = 1;
         }
-        let r = refine(
-            &points,
-            &start,
-            2,
-            Family::Curves,
-            &RefineParams::default(),
-            Some(8),
-        );
+        let r = curves_k_chosen(&points, &start, 2);
         let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
         assert_eq!(r.labels, want);
         assert_eq!(r.structures.len(), 2);
@@ -962,14 +967,7 @@ mod tests {
     #[test]
     fn far_points_are_outliers_unless_outliers_are_off() {
         let (points, start, _) = two_circles_and_two_far_points();
-        let r = refine(
-            &points,
-            &start,
-            2,
-            Family::Curves,
-            &RefineParams::default(),
-            Some(8),
-        );
+        let r = curves_k_chosen(&points, &start, 2);
         assert_eq!(&r.labels[80..], &[-1, -1]);
         assert!(r.labels[..80].iter().all(|&l| l >= 0));
         let kept = RefineParams {
@@ -1072,14 +1070,7 @@ mod tests {
             .enumerate()
             .map(|(i, &l)| if l == 0 && i % 4 == 0 { 2 } else { l })
             .collect();
-        let r = refine(
-            &points,
-            &start,
-            3,
-            Family::Curves,
-            &RefineParams::default(),
-            Some(8),
-        );
+        let r = curves_k_chosen(&points, &start, 3);
         assert_eq!(r.structures.len(), 2);
         let want: Vec<i64> = truth.iter().map(|&l| l as i64).collect();
         assert_eq!(r.labels, want);
@@ -1098,14 +1089,7 @@ mod tests {
             .collect();
         let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
         let start: Vec<usize> = (0..160).map(|i| i / 40).collect();
-        let r = refine(
-            &points,
-            &start,
-            4,
-            Family::Curves,
-            &RefineParams::default(),
-            Some(8),
-        );
+        let r = curves_k_chosen(&points, &start, 4);
         assert_eq!(r.structures.len(), 1, "{:?}", r.structures);
         assert!(r.labels.iter().all(|&l| l == 0));
         assert!(finite(&r));
