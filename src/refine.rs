@@ -657,8 +657,6 @@ fn answer(points: &PointSet, current: Vec<i64>, groups: Vec<Option<Group>>, sigm
 mod tests {
     use super::*;
 
-    /// Two noisy circles of radius 1 and 2 around (0, 0) and (10, 0), `m` points each, with
-    /// deterministic noise of about `noise`.
     /// Curves refined with the default parameters and K chosen (up to 8).
     fn curves_k_chosen(points: &PointSet, start: &[usize], k: usize) -> Refined {
         refine(
@@ -671,6 +669,8 @@ mod tests {
         )
     }
 
+    /// Two noisy circles of radius 1 and 2 around (0, 0) and (10, 0), `m` points each, with
+    /// deterministic noise of about `noise`.
     fn two_circles(m: usize, noise: f64) -> (PointSet, Vec<usize>) {
         let mut values = Vec::new();
         let mut labels = Vec::new();

@@ -404,6 +404,20 @@ impl EllipseFrame {
         d.is_finite().then_some((d, grad))
     }
 
+    /// Distance of (x, y) to the ellipse; INFINITY where undefined.
+    pub(crate) fn distance(&self, x: f64, y: f64) -> f64 {
+        self.signed(x, y).map_or(f64::INFINITY, |(d, _)| d.abs())
+    }
+
+    /// min([`EllipseFrame::distance`], `cap`); a point whose first-order (Sampson) distance
+    /// exceeds 2 × `cap` is far from the curve and gets `cap` without the foot-point search.
+    pub(crate) fn distance_capped(&self, x: f64, y: f64, cap: f64) -> f64 {
+        if self.sampson(x, y) > 2.0 * cap {
+            return cap;
+        }
+        self.signed(x, y).map_or(cap, |(d, _)| d.abs().min(cap))
+    }
+
     /// First-order (Sampson) distance |Q| / ‖∇Q‖ with Q = u²/a² + v²/b² − 1: cheap, good near
     /// the curve, an underestimate far from it; INFINITY at the centre.
     fn sampson(&self, x: f64, y: f64) -> f64 {
@@ -420,22 +434,6 @@ impl EllipseFrame {
 #[cfg(test)]
 fn ellipse_signed_distance(e: &EllipseParams, x: f64, y: f64) -> Option<(f64, [f64; 5])> {
     EllipseFrame::new(e)?.signed(x, y)
-}
-
-impl EllipseFrame {
-    /// Distance of (x, y) to the ellipse; INFINITY where undefined.
-    pub(crate) fn distance(&self, x: f64, y: f64) -> f64 {
-        self.signed(x, y).map_or(f64::INFINITY, |(d, _)| d.abs())
-    }
-
-    /// min([`EllipseFrame::distance`], `cap`); a point whose first-order (Sampson) distance
-    /// exceeds 2 × `cap` is far from the curve and gets `cap` without the foot-point search.
-    pub(crate) fn distance_capped(&self, x: f64, y: f64, cap: f64) -> f64 {
-        if self.sampson(x, y) > 2.0 * cap {
-            return cap;
-        }
-        self.signed(x, y).map_or(cap, |(d, _)| d.abs().min(cap))
-    }
 }
 
 /// Distance of (x, y) to the ellipse; INFINITY for invalid parameters.

@@ -284,7 +284,7 @@ pub fn refine_robust<E: Estimator>(
 }
 
 /// The floor of σ for data of RMS spread `scale`.
-fn sigma_floor(scale: f64) -> f64 {
+pub(crate) fn sigma_floor(scale: f64) -> f64 {
     if scale.is_finite() && scale > 0.0 {
         SIGMA_FLOOR * scale
     } else {

@@ -51,7 +51,7 @@ use super::linalg::Mat3;
 use super::line::{self, LineEstimator};
 use super::robust::{
     Estimator, INLIER_SIGMAS, Robust, SIGMA_FLOOR, evaluate, fit_robust, fit_unrefined,
-    refine_robust,
+    refine_robust, sigma_floor,
 };
 use super::subspace::{RIGID_RANK, SubspaceEstimator, fit_subspace, subspace_model};
 use super::{Family, Fit, GeometryError, Model, validate};
@@ -119,9 +119,10 @@ fn curve(name: &str, pts: &[[f64; 2]]) -> Option<Result<Candidate, GeometryError
     })
 }
 
-/// The floor under a robust fit's noise level on `rows` of `family`: [`SIGMA_FLOOR`] × the
-/// rows' scale (RMS spread; for correspondences the mean of the two images'), as the fit
-/// applies it; 0 for motion subspaces and rows that are not of the family's width.
+/// The floor under a robust fit's noise level on `rows` of `family` ([`sigma_floor`] of the
+/// rows' scale: RMS spread, for correspondences the mean of the two images'), as the fit
+/// applies it; the smallest positive number for motion subspaces and rows that are not of the
+/// family's width.
 pub fn noise_floor(family: Family, rows: &[&[f64]]) -> f64 {
     let scale = match family {
         Family::Curves => points2(rows).map_or(0.0, |p| spread(p.iter().copied())),
@@ -130,7 +131,7 @@ pub fn noise_floor(family: Family, rows: &[&[f64]]) -> f64 {
         }
         Family::Subspace => 0.0,
     };
-    SIGMA_FLOOR * scale
+    sigma_floor(scale)
 }
 
 /// The data's scale for two-view rows: the mean of the two images' RMS spreads.

@@ -404,11 +404,7 @@ fn evaluate_cell(
     let per_sample = rows
         .iter()
         .map(|r| {
-            let chosen = match selection {
-                Selection::Sod => &r.sod,
-                Selection::Silhouette => &r.silhouette,
-                Selection::Fixed(_) => &r.known,
-            };
+            let chosen = by_selection(selection, &r.known, &r.sod, &r.silhouette);
             SampleResult {
                 name: r.name.clone(),
                 k_true: r.k_true,
@@ -427,16 +423,22 @@ fn evaluate_cell(
         mean_points: rows.iter().map(|r| r.n as f64).sum::<f64>() / n,
         mean_k: rows.iter().map(|r| r.k_true as f64).sum::<f64>() / n,
         known: t.known,
-        chosen: match selection {
-            Selection::Sod => t.sod,
-            Selection::Silhouette => t.silhouette,
-            Selection::Fixed(_) => t.known,
-        },
+        chosen: by_selection(selection, t.known, t.sod, t.silhouette),
         totals: t,
         skipped: cell.skipped,
         per_sample,
         seconds: 0.0,
     })
+}
+
+/// Of the same quantity with the true K, by SOD and by the silhouette, the one `selection`
+/// gives (the true K's for a fixed K).
+fn by_selection<T>(selection: &Selection, known: T, sod: T, silhouette: T) -> T {
+    match selection {
+        Selection::Sod => sod,
+        Selection::Silhouette => silhouette,
+        Selection::Fixed(_) => known,
+    }
 }
 
 /// Builds a cell's samples (only when it runs).
