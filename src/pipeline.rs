@@ -79,8 +79,9 @@ pub struct FitOptions<'a> {
     /// Geometric refinement, or `None` for the learned clustering alone.
     pub refine: Option<RefineParams>,
     /// Without refinement, whether a fit may answer the network's outlier group −1 (curves and
-    /// correspondences; the request's `outliers`, by default the card's): the one group of the
-    /// chosen K, or of the k + 1 clustering for a k given, that follows no model.
+    /// correspondences; the request's `outliers`, by default the card's): the group of the chosen
+    /// K that holds the outliers ([`refine::outlier_group`]), or the one group of the k + 1
+    /// clustering for a k given that follows no model.
     pub outlier_group: bool,
 }
 
@@ -603,9 +604,11 @@ fn fit_counting(
                 None => unchanged(&clustering),
             },
             // K chosen: the outliers' group is among the chosen K, and is not a structure.
+            // Naming it moves no label, so the widest of several groups that follow no model
+            // is named too.
             _ => match the_outlier_group(model, points, &clustering) {
                 Some(out) => (
-                    without_group(&clustering.labels, out),
+                    without_group(&clustering.labels, out.group),
                     Vec::new(),
                     clustering.k - 1,
                 ),
@@ -1075,11 +1078,12 @@ fn motions(points: &PointSet, outcome: &FitOutcome) -> Vec<Motion> {
 }
 
 /// A fit given `k` without refinement, on a model whose network learned the outliers as a group
-/// of their own (curves and correspondences, as [`fit`] checks): the k + 1 clustering,
-/// when exactly one of its groups follows no model of the family ([`refine::outlier_groups`]),
-/// with that group's points labelled -1 and the others numbered 0..k. `None` otherwise, and the
-/// k clustering stands. Clustered into k groups, the outliers would take one and two
-/// structures share another.
+/// of their own (curves and correspondences, as [`fit`] checks): the k + 1 clustering, when
+/// exactly one of its groups follows no model ([`refine::OutlierGroup::sole`]), with that
+/// group's points labelled -1 and the others numbered 0..k. `None` otherwise, and the k
+/// clustering stands. Clustered into k groups, the outliers would take one and two structures
+/// share another; but the k + 1 clustering is another clustering, and the switch asks for the
+/// surer sign.
 fn outlier_group_apart(
     model: &LoadedModel,
     points: &PointSet,
@@ -1088,37 +1092,32 @@ fn outlier_group_apart(
     k: usize,
 ) -> Result<Option<(Clustering, Vec<i64>)>, FitError> {
     let wider = cluster(model, embedding, &params.with_fixed_k(k + 1)?)?;
-    Ok(the_outlier_group(model, points, &wider).map(|out| {
-        let labels = without_group(&wider.labels, out);
+    let sole = the_outlier_group(model, points, &wider).filter(|out| out.sole);
+    Ok(sole.map(|out| {
+        let labels = without_group(&wider.labels, out.group);
         (wider, labels)
     }))
 }
 
-/// The one group of `clustering` that follows no model of the card's family
-/// ([`refine::outlier_groups`]): the outliers, where the network learned them as a group of their
-/// own. `None` when no group or more than one does, or for a single group (nothing else would
-/// be left).
+/// The group of `clustering` that holds the outliers, where the network learned them as a group
+/// of their own ([`refine::outlier_group`]); never for motion subspaces, whose networks learned no
+/// outlier group.
 fn the_outlier_group(
     model: &LoadedModel,
     points: &PointSet,
     clustering: &Clustering,
-) -> Option<usize> {
+) -> Option<refine::OutlierGroup> {
     let family = model.card.family();
-    if clustering.k < 2 || family == geometry::Family::Subspace {
+    if family == geometry::Family::Subspace {
         return None;
     }
-    let no_model = refine::outlier_groups(
+    refine::outlier_group(
         points,
         &clustering.labels,
         clustering.k,
         family,
         model.pool(),
-    );
-    let mut flagged = no_model.iter().enumerate().filter(|&(_, &o)| o);
-    match (flagged.next(), flagged.next()) {
-        (Some((out, _)), None) => Some(out),
-        _ => None,
-    }
+    )
 }
 
 /// The clustering's labels and K as the answer, with no structures (an unrefined fit).

@@ -257,26 +257,68 @@ fn learned_groups(
     (groups, sigma)
 }
 
-/// Which learned groups of `labels` (in 0..k) follow no model of `family`: the outlier group a
-/// network trained with the outliers as one more group forms, which refinement dissolves. None
-/// when the groups' noise level is 0.
-pub fn outlier_groups(
+/// The learned group that holds the outliers ([`outlier_group`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OutlierGroup {
+    /// Its label.
+    pub group: usize,
+    /// Whether it is the only group that follows no model (else the widest of several).
+    pub sole: bool,
+}
+
+/// The learned group of `labels` (in 0..k) that holds the outliers, where a network trained
+/// with the outliers as one more group formed it: the one group that follows no model of
+/// `family` ([`Group::follows_no_model`]), or, when several do, the one whose noise level
+/// exceeds [`OUTLIER_GROUP_SIGMAS`] × every other group's (a structure noisier than the median
+/// also fails the noise test, but gross outliers spread tens of times wider). `None` for a
+/// single group, when the groups' noise level is 0 (noise-free groups give no scale to judge a
+/// spread by), when no group follows no model, or when several do and none stands out.
+pub fn outlier_group(
     points: &PointSet,
     labels: &[usize],
     k: usize,
     family: Family,
     threads: &Threads,
-) -> Vec<bool> {
+) -> Option<OutlierGroup> {
+    if k < 2 {
+        return None;
+    }
     threads.install(|| {
         let (groups, sigma) = learned_groups(points, labels, k, family, threads);
-        // Noise-free groups (σ = 0) give no scale to judge a group's spread by.
-        groups
-            .iter()
-            .map(|g| {
-                g.as_ref()
-                    .is_some_and(|g| sigma > 0.0 && g.follows_no_model(sigma))
+        if sigma <= 0.0 {
+            return None;
+        }
+        let flagged: Vec<usize> = (0..k)
+            .filter(|&j| {
+                groups[j]
+                    .as_ref()
+                    .is_some_and(|g| g.follows_no_model(sigma))
             })
-            .collect()
+            .collect();
+        match flagged[..] {
+            [] => None,
+            [group] => Some(OutlierGroup { group, sole: true }),
+            _ => {
+                let spread = |j: usize| {
+                    groups[j]
+                        .as_ref()
+                        .filter(|g| !g.frozen && g.fit.sigma.is_finite())
+                        .map_or(0.0, |g| g.fit.sigma)
+                };
+                let widest = flagged
+                    .iter()
+                    .copied()
+                    .max_by(|&a, &b| spread(a).total_cmp(&spread(b)))?;
+                let next = (0..k)
+                    .filter(|&j| j != widest)
+                    .map(spread)
+                    .fold(0.0, f64::max);
+                (spread(widest) > OUTLIER_GROUP_SIGMAS * next).then_some(OutlierGroup {
+                    group: widest,
+                    sole: false,
+                })
+            }
+        }
     })
 }
 
@@ -948,20 +990,72 @@ mod tests {
             .flat_map(|i| circles.row(i).to_vec())
             .collect();
         let mut labels = labels;
-        // 30 points scattered over the box the circles span, as a third learned group.
-        for i in 0..30u64 {
-            let u = (i.wrapping_mul(2_654_435_761) % 1000) as f64 / 1000.0;
-            let v = (i.wrapping_mul(40_503) % 997) as f64 / 997.0;
-            values.extend([-1.0 + 13.0 * u, -2.0 + 4.0 * v]);
-            labels.push(2);
-        }
+        // 30 points scattered over the plane around the circles, as a third learned group.
+        values.extend(scatter(30, 0));
+        labels.extend([2; 30]);
         let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
         let threads = Threads::default();
-        let flagged = outlier_groups(&points, &labels, 3, Family::Curves, &threads);
-        assert_eq!(flagged, vec![false, false, true]);
-        // The two circles alone: no group is flagged.
-        let clean = outlier_groups(&circles, &labels[..80], 2, Family::Curves, &threads);
-        assert_eq!(clean, vec![false, false]);
+        let found = outlier_group(&points, &labels, 3, Family::Curves, &threads);
+        assert_eq!(
+            found,
+            Some(OutlierGroup {
+                group: 2,
+                sole: true
+            })
+        );
+        // The two circles alone: no group is.
+        let clean = outlier_group(&circles, &labels[..80], 2, Family::Curves, &threads);
+        assert_eq!(clean, None);
+    }
+
+    /// `m` points scattered over the box x in [-1, 12], y in [-2, 10], deterministically.
+    fn scatter(m: u64, salt: u64) -> Vec<f64> {
+        (0..m)
+            .flat_map(|i| {
+                let u = ((i + salt).wrapping_mul(2_654_435_761) % 1000) as f64 / 1000.0;
+                let v = ((i + salt).wrapping_mul(40_503) % 997) as f64 / 997.0;
+                [-1.0 + 13.0 * u, -2.0 + 12.0 * v]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn of_several_groups_following_no_model_the_widest_by_far_holds_the_outliers() {
+        // Two clean circles, a third circle five times noisier than they are (it fails the
+        // noise test too), and 30 scattered points.
+        let (circles, mut labels) = two_circles(40, 0.02);
+        let mut values = circles.values().to_vec();
+        for i in 0..40 {
+            let t = i as f64 * 0.7;
+            let e = 0.1 * (((i * 7919) % 101) as f64 / 50.0 - 1.0);
+            values.extend([5.0 + (1.5 + e) * t.cos(), 8.0 + (1.5 + e) * t.sin()]);
+            labels.push(2);
+        }
+        let with_noisy = values.clone();
+        values.extend(scatter(30, 0));
+        labels.extend([3; 30]);
+        let threads = Threads::default();
+        let points = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
+        let found = outlier_group(&points, &labels, 4, Family::Curves, &threads);
+        assert_eq!(
+            found,
+            Some(OutlierGroup {
+                group: 3,
+                sole: false
+            })
+        );
+        // Two scattered groups of the same spread: neither stands out.
+        let mut two = with_noisy;
+        two.extend(scatter(30, 0));
+        two.extend(scatter(30, 500));
+        let mut two_labels = labels[..120].to_vec();
+        two_labels.extend([3; 30]);
+        two_labels.extend([4; 30]);
+        let points = PointSet::from_flat(Kind::Points2d, 2, two).unwrap();
+        assert_eq!(
+            outlier_group(&points, &two_labels, 5, Family::Curves, &threads),
+            None
+        );
     }
 
     #[test]

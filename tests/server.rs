@@ -516,11 +516,15 @@ fn a_k_given_counts_the_structures_and_the_outliers_are_answered_apart() {
 fn a_chosen_k_counts_the_structures_and_the_outliers_are_answered_apart() {
     // The default model for correspondences (adelaide-fundamental, unrefined) chooses K among
     // groups one of which is the outliers its network learned as a group: that group is
-    // answered -1 and k counts the motions.
+    // answered -1 and k counts the motions. In biscuitbookbox and toycubecar a motion's group
+    // is noisier than the others and fails the noise test too; the outliers' group is the
+    // widest by far.
     let server = Server::start(&[]);
     for file in [
         "adelaidermf/breadcubechips.json",
         "adelaidermf/gamebiscuit.json",
+        "adelaidermf/biscuitbookbox.json",
+        "adelaidermf/toycubecar.json",
     ] {
         let f = dataset(file);
         let structures = f["num_models"].as_u64().unwrap();
