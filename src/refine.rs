@@ -43,9 +43,9 @@
 //! **More structures than the chosen K** ([`splits_pooled`]). When two structures share one
 //! learned group, their pooled fit sets a noise level under which both fit, so neither the
 //! rounds nor the hypotheses part them. With K chosen the fit also refines the k + 1
-//! clustering ([`crate::pipeline::refine_chosen`]) and keeps that answer when it has more
-//! structures, a noise level ([`Refined::noise`]) at most half the k answer's, and at most 5 %
-//! of the points more as outliers. On the AdelaideRMF homography folds SOD's K was right on
+//! clustering ([`crate::pipeline::refine_chosen`]) and keeps that answer when it has at least as
+//! many structures, a noise level ([`Refined::noise`]) at most half the k answer's, and at most
+//! 5 % of the points more as outliers. On the AdelaideRMF homography folds SOD's K was right on
 //! 52.9 % of the pairs before, 82.4 % after.
 //!
 //! **Noise and threshold.** The noise level σ is the median of the groups' robust noise levels
@@ -179,13 +179,16 @@ pub const SPLIT_NOISE_FACTOR: f64 = 2.0;
 pub const SPLIT_MORE_OUTLIERS: f64 = 0.05;
 
 /// Whether `wider` (refined from one more cluster) splits a structure that `answer` pooled: it
-/// has more structures that measure a noise, its noise ([`Refined::noise`]) is at most 1 / [`SPLIT_NOISE_FACTOR`] of
-/// `answer`'s, and it flags at most [`SPLIT_MORE_OUTLIERS`] of the `n` points more as outliers.
-/// Two planes (or curves) held by one structure give it a noise level near their separation;
-/// apart, each has the sensor's. A structure split in two halves keeps its noise, and an
-/// outlier group split in two is dissolved again, so neither passes.
+/// has at least as many structures that measure a noise, its noise ([`Refined::noise`]) is at
+/// most 1 / [`SPLIT_NOISE_FACTOR`] of `answer`'s, and it flags at most [`SPLIT_MORE_OUTLIERS`]
+/// of the `n` points more as outliers. Two planes (or curves) held by one structure give it a
+/// noise level near their separation; apart, each has the sensor's. As many structures count
+/// too: two structures that each held parts of two crossing curves, against the two curves
+/// apart (the extra group taken by a third structure the rounds then dropped or merged). A
+/// structure split in two halves keeps its noise, and an outlier group split in two is
+/// dissolved again, so neither passes.
 pub fn splits_pooled(answer: &Refined, wider: &Refined, n: usize) -> bool {
-    wider.measured().count() > answer.measured().count()
+    wider.measured().count() >= answer.measured().count()
         && wider.noise() * SPLIT_NOISE_FACTOR <= answer.noise()
         && wider.outliers() as f64 <= answer.outliers() as f64 + SPLIT_MORE_OUTLIERS * n as f64
 }
@@ -816,7 +819,7 @@ mod tests {
         assert_eq!(extra.noise(), answer.noise());
         assert!(
             !splits_pooled(&answer, &extra, 200),
-            "no more measured structures"
+            "as many measured structures, the same noise"
         );
         let none = Refined {
             labels: vec![-1; 3],
@@ -844,6 +847,19 @@ mod tests {
             !splits_pooled(&apart, &pooled, n),
             "fewer structures never split"
         );
+        // Two structures that each held parts of both circles, against the circles apart: as
+        // many structures, a fraction of the noise.
+        let half = |label| Structure {
+            label,
+            inliers: n / 2,
+            ..pooled.structures[0].clone()
+        };
+        let mixed = Refined {
+            structures: vec![half(0), half(1)],
+            ..pooled.clone()
+        };
+        assert!(splits_pooled(&mixed, &apart, n));
+        assert!(!splits_pooled(&apart, &mixed, n));
         // The same split flagging a tenth of the points as outliers besides is not kept.
         let mut flagging = apart.clone();
         for l in flagging.labels.iter_mut().step_by(10) {
