@@ -1,6 +1,8 @@
-"""Crossing curves in pixels, as a new user would draw them: a line, a circle and an ellipse over
-a 640 x 480 image, 100 points each, crossing one another, with Gaussian noise of 0.5, 1 and 2 px
-and 0 or 20 % gross outliers uniform over the image; 20 seeds of each, 120 sets. Each set is
+"""Crossing curves in pixels, as a new user would draw them: a line, a circle and an ellipse
+around the middle of a 640 x 480 image (the circle and the ellipse drawn around nearby centres,
+so most layouts cross), 100 points each, with Gaussian noise of 0.5, 1 and 2 px and 0 or 20 %
+gross outliers uniform over the image, rows shuffled; 20 layouts (seeds) under each of the 6
+conditions, 120 sets. Each set is
 fitted with the card's defaults (K chosen) and, with --k, given k = 3. Prints the mean error (in
 %, outliers scored as one more group) and how many answers are wrong (k not 3, or over 5 %
 error). Needs a running server.
@@ -34,10 +36,13 @@ def crossing(seed, noise, outliers, n=100):
         points.append([ex + u * math.cos(th) - v * math.sin(th) + rng.gauss(0, noise),
                        ey + u * math.sin(th) + v * math.cos(th) + rng.gauss(0, noise)])
         labels.append(3)
-    for _ in range(int(outliers * len(points) / (1 - outliers))):
+    for _ in range(round(outliers * len(points) / (1 - outliers))):
         points.append([rng.uniform(0, 640), rng.uniform(0, 480)])
         labels.append(0)
-    return points, labels
+    # Rows in no particular order, as a detector or a scanner would give them.
+    order = list(range(len(points)))
+    rng.shuffle(order)
+    return [points[i] for i in order], [labels[i] for i in order]
 
 
 def main():

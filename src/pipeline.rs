@@ -17,7 +17,7 @@
 //! 5. **refine** ([`crate::refine`]): an explicit model per group (line, circle, ellipse,
 //!    homography, fundamental matrix, motion subspace), fitted on the input as sent (every frame,
 //!    caller's units); points reassigned to the structure they fit best, outliers labelled −1.
-//!    With K chosen, the k + 1 clustering is refined too and answers where it splits a structure
+//!    With K chosen, the k + 1 clustering is refined too and answers where it parts structures
 //!    that pooled two ([`refine_chosen`]); with a k given, where the outliers take a group of
 //!    their own.
 //! 6. **answer** ([`FitOutcome`]): labels, K, structures, the residual curve and the stage
@@ -604,8 +604,8 @@ fn fit_counting(
                 None => unchanged(&clustering),
             },
             // K chosen: the outliers' group is among the chosen K, and is not a structure.
-            // Naming it moves no label, so the widest of several groups that follow no model
-            // is named too.
+            // Naming it moves no point to another group, so the widest of several groups that
+            // follow no model is named too.
             _ => match the_outlier_group(model, points, &clustering) {
                 Some(out) => (
                     without_group(&clustering.labels, out.group),

@@ -172,15 +172,15 @@ impl Refined {
     }
 }
 
-/// How much lower an answer's noise must be for more structures to be kept over fewer.
+/// How much lower the k + 1 answer's noise must be for it to be kept over the k answer.
 pub const SPLIT_NOISE_FACTOR: f64 = 2.0;
-/// The most outliers, as a share of the points, that an answer with more structures may flag
-/// beyond the other's.
+/// The most outliers, as a share of the points, that the k + 1 answer may flag beyond the k
+/// answer's.
 pub const SPLIT_MORE_OUTLIERS: f64 = 0.05;
 
 /// Whether `wider` (refined from one more cluster) splits a structure that `answer` pooled: it
-/// has at least as many structures that measure a noise, its noise ([`Refined::noise`]) is at
-/// most 1 / [`SPLIT_NOISE_FACTOR`] of `answer`'s, and it flags at most [`SPLIT_MORE_OUTLIERS`]
+/// has at least as many structures that measure a noise, its noise ([`Refined::noise`]) is
+/// finite and at most 1 / [`SPLIT_NOISE_FACTOR`] of `answer`'s, and it flags at most [`SPLIT_MORE_OUTLIERS`]
 /// of the `n` points more as outliers. Two planes (or curves) held by one structure give it a
 /// noise level near their separation; apart, each has the sensor's. As many structures count
 /// too: two structures that each held parts of two crossing curves, against the two curves
@@ -189,6 +189,7 @@ pub const SPLIT_MORE_OUTLIERS: f64 = 0.05;
 /// dissolved again, so neither passes.
 pub fn splits_pooled(answer: &Refined, wider: &Refined, n: usize) -> bool {
     wider.measured().count() >= answer.measured().count()
+        && wider.noise().is_finite()
         && wider.noise() * SPLIT_NOISE_FACTOR <= answer.noise()
         && wider.outliers() as f64 <= answer.outliers() as f64 + SPLIT_MORE_OUTLIERS * n as f64
 }
@@ -827,6 +828,10 @@ mod tests {
             sigma: 0.0,
         };
         assert_eq!(none.noise(), f64::INFINITY);
+        assert!(
+            !splits_pooled(&none, &none, 3),
+            "nothing measured either way"
+        );
     }
 
     #[test]
@@ -860,6 +865,13 @@ mod tests {
         };
         assert!(splits_pooled(&mixed, &apart, n));
         assert!(!splits_pooled(&apart, &mixed, n));
+        // Fewer structures are never a split, however much less noisy.
+        let one_apart = Refined {
+            structures: vec![apart.structures[0].clone()],
+            ..apart.clone()
+        };
+        assert!(one_apart.noise() * SPLIT_NOISE_FACTOR <= mixed.noise());
+        assert!(!splits_pooled(&mixed, &one_apart, n));
         // The same split flagging a tenth of the points as outliers besides is not kept.
         let mut flagging = apart.clone();
         for l in flagging.labels.iter_mut().step_by(10) {

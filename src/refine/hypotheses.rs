@@ -84,7 +84,7 @@ pub fn swaps(
     if slots.is_empty() || !(threshold.is_finite() && threshold > 0.0) {
         return Vec::new();
     }
-    let rows = seen_rows(points);
+    let rows = seen_rows(points.len());
     let tau2 = threshold * threshold;
     let cost_row = |model: &Model| -> Vec<f64> {
         let model = model.prepared();
@@ -154,25 +154,12 @@ fn moved(chosen: &[usize]) -> Vec<(usize, usize)> {
         .collect()
 }
 
-/// The rows proposals and the choice see, in a canonical order (sorted by their values, ties
-/// by index: tied rows are equal), so that the anchors and the proposals are a function of the
-/// point set and not of the order it came in: all, or [`MAX_ROWS`] evenly spread in that order.
-fn seen_rows(points: &PointSet) -> Vec<usize> {
-    let mut order: Vec<usize> = (0..points.len()).collect();
-    order.sort_by(|&a, &b| {
-        let (ra, rb) = (points.row(a), points.row(b));
-        ra.iter()
-            .zip(rb)
-            .map(|(x, y)| x.total_cmp(y))
-            .find(|o| o.is_ne())
-            .unwrap_or(std::cmp::Ordering::Equal)
-            .then(a.cmp(&b))
-    });
-    let n = order.len();
+/// The rows proposals and the choice see: all, or [`MAX_ROWS`] evenly spread in input order.
+fn seen_rows(n: usize) -> Vec<usize> {
     if n <= MAX_ROWS {
-        return order;
+        return (0..n).collect();
     }
-    (0..MAX_ROWS).map(|k| order[k * n / MAX_ROWS]).collect()
+    (0..MAX_ROWS).map(|k| k * n / MAX_ROWS).collect()
 }
 
 /// Hypotheses of every type of `family`, each fitted on one neighbourhood of the `rows` of
@@ -415,67 +402,20 @@ mod tests {
     }
 
     #[test]
-    fn the_swaps_do_not_depend_on_the_order_of_the_rows() {
-        // Three circles, 40 points each, listed circle by circle; the current model is the
-        // first circle, and two more structures may be added.
-        let centres = [(0.0, 0.0, 1.0), (4.0, 0.0, 2.0), (1.0, 3.0, 1.5)];
-        let rows: Vec<[f64; 2]> = (0..120)
-            .map(|i| {
-                let (cx, cy, r) = centres[i / 40];
-                let t = (i % 40) as f64 * 0.7;
-                let r = r + 0.01 * (((i * 7919) % 101) as f64 / 50.0 - 1.0);
-                [cx + r * t.cos(), cy + r * t.sin()]
-            })
-            .collect();
-        let set = |order: &[usize]| {
-            let values = order.iter().flat_map(|&i| rows[i]).collect();
-            PointSet::from_flat(crate::data::Kind::Points2d, 2, values).unwrap()
-        };
-        let first = Model::Circle {
-            cx: 0.0,
-            cy: 0.0,
-            r: 1.0,
-        };
-        let threads = Threads::default();
-        let answer = |order: &[usize]| -> Vec<(Option<usize>, Fit, f64)> {
-            swaps(
-                &set(order),
-                &[Some(&first)],
-                Family::Curves,
-                0.05,
-                2,
-                &threads,
-            )
-            .into_iter()
-            .map(|s| (s.slot, s.fit, s.share))
-            .collect()
-        };
-        let listed: Vec<usize> = (0..120).collect();
-        let by_structure = answer(&listed);
-        assert_eq!(by_structure.len(), 2, "the two other circles are added");
-        // Interleaved, and reversed.
-        let interleaved: Vec<usize> = (0..120).map(|i| (i % 3) * 40 + i / 3).collect();
-        let reversed: Vec<usize> = (0..120).rev().collect();
-        assert_eq!(answer(&interleaved), by_structure);
-        assert_eq!(answer(&reversed), by_structure);
-    }
-
-    #[test]
     fn large_sets_are_seen_evenly_and_tiny_ones_propose_nothing() {
-        // Rows at x = n - 1, ..., 0: seen evenly in the order of their values.
-        let n = 10 * MAX_ROWS;
-        let values = (0..n).flat_map(|i| [(n - 1 - i) as f64, 0.0]).collect();
-        let many = PointSet::from_flat(crate::data::Kind::Points2d, 2, values).unwrap();
-        let rows = seen_rows(&many);
+        let rows = seen_rows(10 * MAX_ROWS);
         assert_eq!(rows.len(), MAX_ROWS);
-        assert_eq!((rows[0], rows[1], rows[MAX_ROWS - 1]), (n - 1, n - 11, 9));
+        assert_eq!(
+            (rows[0], rows[1], rows[MAX_ROWS - 1]),
+            (0, 10, 10 * MAX_ROWS - 10)
+        );
+        assert_eq!(seen_rows(3), vec![0, 1, 2]);
         let three = PointSet::from_flat(
             crate::data::Kind::Points2d,
             2,
-            vec![2.0, 0.0, 0.0, 0.0, 1.0, 0.0],
+            vec![0.0, 0.0, 1.0, 0.0, 2.0, 0.0],
         )
         .unwrap();
-        assert_eq!(seen_rows(&three), vec![1, 2, 0]);
         let one = Threads::default();
         assert!(propose(&three, &[0, 1, 2], Family::Curves, 0.1, &one).is_empty());
         let line = Model::Line {
