@@ -599,21 +599,13 @@ fn fit_counting(
                         clustering = both_ks(&clustering, wider);
                         (labels, Vec::new(), k)
                     }
-                    None => unchanged(&clustering),
+                    // Else the k clustering, its own outlier group (if any) answered -1.
+                    None => outliers_named(model, points, &clustering),
                 },
-                None => unchanged(&clustering),
+                None => outliers_named(model, points, &clustering),
             },
             // K chosen: the outliers' group is among the chosen K, and is not a structure.
-            // Naming it moves no point to another group, so the widest of several groups that
-            // follow no model is named too.
-            _ => match the_outlier_group(model, points, &clustering) {
-                Some(out) => (
-                    without_group(&clustering.labels, out.group),
-                    Vec::new(),
-                    clustering.k - 1,
-                ),
-                None => unchanged(&clustering),
-            },
+            _ => outliers_named(model, points, &clustering),
         },
         None => unchanged(&clustering),
     };
@@ -630,7 +622,7 @@ fn fit_counting(
         ..observed(points, image, &labels, k, flags_outliers)
     });
     if let Selection::Fixed(asked) = params.selection() {
-        warnings.extend(fewer_than_asked(asked, k));
+        warnings.extend(fewer_than_asked(asked, k, refine_params.is_some()));
     }
     Ok(FitOutcome {
         warnings,
@@ -1120,6 +1112,25 @@ fn the_outlier_group(
     )
 }
 
+/// The clustering's labels and K as the answer, with no structures (an unrefined fit), its group
+/// that holds the outliers ([`the_outlier_group`]) answered -1 and not counted in K. Naming it
+/// moves no point to another group, so the widest of several groups that follow no model is
+/// named too.
+fn outliers_named(
+    model: &LoadedModel,
+    points: &PointSet,
+    clustering: &Clustering,
+) -> (Vec<i64>, Vec<Structure>, usize) {
+    match the_outlier_group(model, points, clustering) {
+        Some(out) => (
+            without_group(&clustering.labels, out.group),
+            Vec::new(),
+            clustering.k - 1,
+        ),
+        None => unchanged(clustering),
+    }
+}
+
 /// The clustering's labels and K as the answer, with no structures (an unrefined fit).
 fn unchanged(clustering: &Clustering) -> (Vec<i64>, Vec<Structure>, usize) {
     (
@@ -1129,10 +1140,19 @@ fn unchanged(clustering: &Clustering) -> (Vec<i64>, Vec<Structure>, usize) {
     )
 }
 
-/// The warning of an answer with fewer structures than the k the caller gave (refinement
-/// dropped the difference); `None` when it has k.
-fn fewer_than_asked(asked: usize, answered: usize) -> Option<String> {
+/// The warning of an answer with fewer structures than the k the caller gave (`refined`:
+/// refinement dropped the difference; else one learned group was the outliers'); `None` when
+/// it has k.
+fn fewer_than_asked(asked: usize, answered: usize, refined: bool) -> Option<String> {
     let dropped = asked.checked_sub(answered).filter(|&d| d > 0)?;
+    if !refined {
+        return Some(format!(
+            "k = {asked} was given and the answer has {answered} structure{}: one of the \
+             {asked} learned groups is the outliers', answered -1 (\"outliers\": false answers \
+             the {asked} learned groups)",
+            if answered == 1 { "" } else { "s" }
+        ));
+    }
     let (noun, their) = if dropped == 1 {
         ("group", "its")
     } else {
@@ -1370,16 +1390,25 @@ pub(crate) mod tests {
 
     #[test]
     fn an_answer_with_fewer_structures_than_the_k_given_says_so() {
-        assert_eq!(fewer_than_asked(3, 3), None);
-        assert_eq!(fewer_than_asked(3, 4), None);
-        let one = fewer_than_asked(3, 2).unwrap();
+        assert_eq!(fewer_than_asked(3, 3, true), None);
+        assert_eq!(fewer_than_asked(3, 4, true), None);
+        assert_eq!(fewer_than_asked(3, 3, false), None);
+        let unrefined = fewer_than_asked(3, 2, false).unwrap();
+        assert!(
+            unrefined.starts_with(
+                "k = 3 was given and the answer has 2 structures: one of the 3 learned groups is \
+                 the outliers'"
+            ),
+            "{unrefined}"
+        );
+        let one = fewer_than_asked(3, 2, true).unwrap();
         assert!(
             one.starts_with(
                 "k = 3 was given and refinement answers 2 structures: 1 learned group followed"
             ),
             "{one}"
         );
-        let two = fewer_than_asked(4, 2).unwrap();
+        let two = fewer_than_asked(4, 2, true).unwrap();
         assert!(two.contains("2 learned groups followed no model or lost most of their points"));
         assert!(
             two.ends_with("(\"refine\": false answers the 4 learned groups)"),
