@@ -916,8 +916,8 @@ fn cases() -> Vec<Case> {
             "invalid_request",
         ),
         (
-            "outliers without refine",
-            json!({"kind": "points2d", "points": two, "refine": false, "outliers": true}),
+            "outlier_threshold without refine",
+            json!({"kind": "points2d", "points": two, "refine": false, "outlier_threshold": 2.0}),
             "invalid_request",
         ),
         (

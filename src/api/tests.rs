@@ -332,6 +332,16 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
         ),
         ("no points", json!({"kind": "points2d"}), E::InvalidRequest),
         (
+            "outlier_threshold without refine",
+            json!({"kind": "points2d", "points": two, "refine": false, "outlier_threshold": 2.0}),
+            E::InvalidRequest,
+        ),
+        (
+            "outliers without refine for tracks",
+            json!({"kind": "trajectories", "points": tracks(), "refine": false, "outliers": true}),
+            E::InvalidRequest,
+        ),
+        (
             "points and matrix",
             json!({"kind": "trajectories", "points": tracks(), "trajectory_matrix": [[0, 1], [0, 1], [0, 1], [0, 1]]}),
             E::InvalidRequest,
@@ -667,6 +677,23 @@ async fn a_request_without_a_model_gets_the_kinds_default() {
         let (status, _, body) = send(&service(&state), post(&good())).await;
         assert_eq!(status, StatusCode::OK, "{body}");
         assert_eq!(body["model"]["name"], expected, "marked {marked:?}");
+    }
+}
+
+/// Unrefined, a curve or correspondence fit may answer its network's outlier group -1, which
+/// the card's `outliers` allows by default: the request may say so, or turn it off.
+#[tokio::test]
+async fn outliers_may_be_asked_of_an_unrefined_points2d_fit() {
+    let state = state(1, 4, Duration::from_secs(60));
+    let app = service(&state);
+    let points: Vec<[f64; 2]> = (0..12)
+        .map(|i| [f64::from(i % 4), f64::from(i / 4)])
+        .collect();
+    for outliers in [true, false] {
+        let body = json!({"kind": "points2d", "points": points, "refine": false,
+                          "outliers": outliers, "k": 2});
+        let (status, _, answer) = send(&app, post(&body)).await;
+        assert_eq!(status, StatusCode::OK, "outliers {outliers}: {answer}");
     }
 }
 

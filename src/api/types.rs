@@ -439,13 +439,25 @@ impl FitRequest {
             self.outliers,
             self.outlier_threshold,
         ) {
-            (false, None | Some(false), None) => None,
-            (false, _, _) => {
+            (false, _, Some(_)) => {
                 return Err(ApiError::new(
                     ErrorCode::InvalidRequest,
-                    "outliers: true and outlier_threshold need refine",
+                    "outlier_threshold needs refine: true (a threshold applies to the refined \
+                     structures' residuals)",
                 ));
             }
+            // Unrefined, curve and correspondence fits answer the outlier group their network
+            // learned -1 (`outlier_group` below); motion networks learned none.
+            (false, Some(true), None)
+                if model.card.family() == crate::geometry::Family::Subspace =>
+            {
+                return Err(ApiError::new(
+                    ErrorCode::InvalidRequest,
+                    "outliers: true needs refine: true for trajectories (their networks learned no \
+                     outlier group)",
+                ));
+            }
+            (false, _, None) => None,
             (true, outliers, threshold) => {
                 if let Some(t) = threshold
                     && !(t.is_finite() && t > 0.0)
