@@ -285,6 +285,22 @@ impl RequestBody for super::types::BatchRequest {
         r#"{"requests": [{"kind": "points2d", "points": [[x, y], ...]}, ...]}"#;
 }
 
+/// Whether the JSON syntax error at `line` and `column` (1-based, as serde_json counts them)
+/// sits on a NaN or an Infinity, which JavaScript and Python's json module write but JSON lacks.
+fn not_a_json_number(bytes: &[u8], line: usize, column: usize) -> bool {
+    let Some(text) = bytes.split(|&b| b == b'\n').nth(line.saturating_sub(1)) else {
+        return false;
+    };
+    let at = column.saturating_sub(1).min(text.len());
+    // serde_json reports the column of the first byte it could not take, or the one after.
+    [at, at.saturating_sub(1)].iter().any(|&i| {
+        let rest = &text[i.min(text.len())..];
+        [&b"NaN"[..], b"Infinity", b"-Infinity"]
+            .iter()
+            .any(|word| rest.starts_with(word))
+    })
+}
+
 /// Parses a JSON body into `T`; errors name the path of the offending value.
 pub fn parse_json<T: RequestBody>(bytes: &[u8]) -> Result<T, ApiError> {
     let mut de = serde_json::Deserializer::from_slice(bytes);
@@ -301,7 +317,13 @@ pub fn parse_json<T: RequestBody>(bytes: &[u8]) -> Result<T, ApiError> {
             );
         }
         if let Err(syntax) = serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
-            return ApiError::new(ErrorCode::MalformedJson, syntax.to_string());
+            let hint = if not_a_json_number(bytes, syntax.line(), syntax.column()) {
+                " (NaN and Infinity are not JSON numbers: send null where a value is unknown, \
+                 or drop the row; Python's json.dumps writes them unless allow_nan=False)"
+            } else {
+                ""
+            };
+            return ApiError::new(ErrorCode::MalformedJson, format!("{syntax}{hint}"));
         }
         // Every body the API takes is an object: say so rather than name a field of it.
         if bytes.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {

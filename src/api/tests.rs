@@ -680,6 +680,43 @@ async fn a_request_without_a_model_gets_the_kinds_default() {
     }
 }
 
+/// A NaN or an Infinity in the body (Python's json.dumps writes them) is malformed JSON, and the
+/// message says why; other syntax errors do not carry that hint.
+#[tokio::test]
+async fn a_nan_in_the_body_is_named_as_not_json() {
+    let state = state(1, 4, Duration::from_secs(60));
+    let app = service(&state);
+    for (body, hinted) in [
+        (r#"{"kind":"points2d","points":[[NaN,1],[0,0]]}"#, true),
+        (
+            "{\"kind\": \"points2d\",\n \"points\": [[0, Infinity], [0, 0]]}",
+            true,
+        ),
+        (
+            r#"{"kind":"points2d","points":[[-Infinity,1],[0,0]]}"#,
+            true,
+        ),
+        (r#"{"kind":"points2d","points":[[0"#, false),
+        (r#"{"kind":"points2d","points":[[nan,1],[0,0]]}"#, false),
+    ] {
+        let req = request(
+            Method::POST,
+            "/v1/fit",
+            Some("application/json"),
+            Body::from(body),
+        );
+        let (status, code, answer) = send(&app, req).await;
+        assert_eq!(status, StatusCode::BAD_REQUEST, "{body}");
+        assert_eq!(code, Some(ErrorCode::MalformedJson), "{body}");
+        let message = answer["error"]["message"].as_str().unwrap();
+        assert_eq!(
+            message.contains("NaN and Infinity are not JSON numbers"),
+            hinted,
+            "{body}: {message}"
+        );
+    }
+}
+
 /// Unrefined, a curve or correspondence fit may answer its network's outlier group -1, which
 /// the card's `outliers` allows by default: the request may say so, or turn it off.
 #[tokio::test]
