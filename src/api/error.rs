@@ -318,8 +318,9 @@ pub fn parse_json<T: RequestBody>(bytes: &[u8]) -> Result<T, ApiError> {
         }
         if let Err(syntax) = serde_json::from_slice::<serde::de::IgnoredAny>(bytes) {
             let hint = if not_a_json_number(bytes, syntax.line(), syntax.column()) {
-                " (NaN and Infinity are not JSON numbers: send null where a value is unknown, \
-                 or drop the row; Python's json.dumps writes them unless allow_nan=False)"
+                " (NaN and Infinity are not JSON numbers: drop the row, or for tracks send null \
+                 where `visible` marks the position unseen; Python's json.dumps writes them \
+                 unless allow_nan=False)"
             } else {
                 ""
             };
