@@ -46,7 +46,8 @@
 //! clustering ([`crate::pipeline::refine_chosen`]) and keeps that answer when it has at least as
 //! many structures, a noise level ([`Refined::noise`]) at most half the k answer's, and at most
 //! 5 % of the points more as outliers. On the AdelaideRMF homography folds SOD's K was right on
-//! 52.9 % of the pairs before, 82.4 % after.
+//! 52.9 % of the pairs without it, 82.4 % with it, and 88.2 % once merging asked one of the two
+//! structures' models instead of both.
 //!
 //! **Noise and threshold.** The noise level σ is the median of the groups' robust noise levels
 //! (each 1.4826 × the median residual inside its group, [`geometry::Fit::sigma`]): the sensor's
