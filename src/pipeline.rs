@@ -590,23 +590,23 @@ fn fit_counting(
             let k = refined.structures.len();
             (refined.labels, refined.structures, k)
         }
-        None if outlier_group => match params.selection() {
+        None if outlier_group => {
             // Given k: the k + 1 clustering, where the outliers have a group of their own.
-            Selection::Fixed(_) => match given.filter(|&k| k < read) {
-                Some(k) => match outlier_group_apart(model, points, &embedding, params, k)? {
-                    Some((wider, labels)) => {
-                        let k = wider.k - 1;
-                        clustering = both_ks(&clustering, wider);
-                        (labels, Vec::new(), k)
-                    }
-                    // Else the k clustering, its own outlier group (if any) answered -1.
-                    None => outliers_named(model, points, &clustering),
-                },
+            let apart = match given.filter(|&k| k < read) {
+                Some(k) => outlier_group_apart(model, points, &embedding, params, k)?,
+                None => None,
+            };
+            match apart {
+                Some((wider, labels)) => {
+                    let k = wider.k - 1;
+                    clustering = both_ks(&clustering, wider);
+                    (labels, Vec::new(), k)
+                }
+                // Else (and with K chosen, where the outliers' group is among the chosen K) the
+                // clustering, its own outlier group (if any) answered -1.
                 None => outliers_named(model, points, &clustering),
-            },
-            // K chosen: the outliers' group is among the chosen K, and is not a structure.
-            _ => outliers_named(model, points, &clustering),
-        },
+            }
+        }
         None => unchanged(&clustering),
     };
     let t3 = Instant::now();

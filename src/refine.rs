@@ -185,8 +185,8 @@ pub const SPLIT_MORE_OUTLIERS: f64 = 0.05;
 
 /// Whether `wider` (refined from one more cluster) splits a structure that `answer` pooled: it
 /// has at least as many structures that measure a noise, its noise ([`Refined::noise`]) is
-/// finite and at most 1 / [`SPLIT_NOISE_FACTOR`] of `answer`'s, and it flags at most [`SPLIT_MORE_OUTLIERS`]
-/// of the `n` points more as outliers. Two planes (or curves) held by one structure give it a
+/// finite and at most 1 / [`SPLIT_NOISE_FACTOR`] of `answer`'s, and it flags at most
+/// [`SPLIT_MORE_OUTLIERS`] of the `n` points more as outliers. Two planes (or curves) held by one structure give it a
 /// noise level near their separation; apart, each has the sensor's. As many structures count
 /// too: two structures that each held parts of two crossing curves, against the two curves
 /// apart (the extra group taken by a third structure the rounds then dropped or merged). A
