@@ -13,7 +13,11 @@
 //! the largest minimal sample of the family's types, at least [`MIN_NEIGHBOURHOOD`]); one
 //! model of every type of the family fitted to that neighbourhood by plain least squares
 //! ([`geometry::fit_plain`]: proposals need no robustness, the choice below weighs them on every
-//! point), then fitted again [`GROW_ROUNDS`] times on every point within τ of it.
+//! point), then fitted again [`GROW_ROUNDS`] times on every point within τ of it. Then
+//! [`UNEXPLAINED_ANCHORS`] more, spread over the points no current model explains within τ, with
+//! their neighbourhoods taken among those points alone: beside a dense structure, the nearest
+//! points of a sparse structure's anchor are the dense one's (a 20-point circle crossing a
+//! 400-point line), while among the unexplained points they are its own.
 //!
 //! **Choice.** With residuals r_h(x) and the outlier threshold τ, a set S of m models explains
 //! the points at the truncated quadratic cost C(S) = Σᵢ min(min_{h∈S} r_h(xᵢ)², τ²). Starting
@@ -43,6 +47,9 @@ use crate::threads::Threads;
 pub const ANCHORS: usize = 32;
 /// Points per neighbourhood, in units of the largest minimal sample of the family's types.
 pub const NEIGHBOURHOOD_FACTOR: usize = 2;
+/// More anchors among the points no current structure explains, whose neighbourhoods are taken
+/// among those points alone.
+pub const UNEXPLAINED_ANCHORS: usize = 16;
 /// The smallest neighbourhood.
 pub const MIN_NEIGHBOURHOOD: usize = 8;
 /// Refits of a hypothesis on the points within τ of it.
@@ -93,13 +100,16 @@ pub fn swaps(
             .collect()
     };
     // The pool: the current models first (pool index = position in `slots`), then hypotheses.
-    let hypotheses = propose(points, &rows, family, threshold, threads);
-    let pool: Vec<Vec<f64>> = threads.map_n(slots.len() + hypotheses.len(), |h| {
-        match h.checked_sub(slots.len()) {
-            Some(i) => cost_row(&hypotheses[i]),
-            None => cost_row(current[slots[h]].expect("live slot")),
-        }
+    let mut pool: Vec<Vec<f64>> = threads.map_n(slots.len(), |h| {
+        cost_row(current[slots[h]].expect("live slot"))
     });
+    // The seen rows no current model explains.
+    let unexplained: Vec<usize> = (0..rows.len())
+        .filter(|&k| pool.iter().all(|costs| costs[k] >= tau2))
+        .map(|k| rows[k])
+        .collect();
+    let hypotheses = propose(points, &rows, &unexplained, family, threshold, threads);
+    pool.extend(threads.map_n(hypotheses.len(), |i| cost_row(&hypotheses[i])));
     let label_cost = label_cost(family, rows.len()) * tau2;
     let mut chosen: Vec<usize> = (0..slots.len()).collect();
     for _ in 0..MAX_SWAPS {
@@ -162,13 +172,15 @@ fn seen_rows(n: usize) -> Vec<usize> {
     (0..MAX_ROWS).map(|k| k * n / MAX_ROWS).collect()
 }
 
-/// Hypotheses of every type of `family`, each fitted on one neighbourhood of the `rows` of
-/// `points` and grown within `threshold`. A neighbourhood that a hypothesis of the same type
-/// already explains gives none (it would give that one again). The hypotheses are the same on
-/// any number of threads.
+/// Hypotheses of every type of `family`, each fitted on one neighbourhood and grown within
+/// `threshold` over the `rows` of `points`: the neighbourhoods of [`ANCHORS`] anchors among
+/// `rows`, then of [`UNEXPLAINED_ANCHORS`] among the `unexplained` rows, taken among those
+/// alone. A neighbourhood that a hypothesis of the same type already explains gives none (it
+/// would give that one again). The hypotheses are the same on any number of threads.
 fn propose(
     points: &PointSet,
     rows: &[usize],
+    unexplained: &[usize],
     family: Family,
     threshold: f64,
     threads: &Threads,
@@ -178,9 +190,28 @@ fn propose(
     if rows.len() < size {
         return Vec::new();
     }
-    let anchors = ANCHORS.min(rows.len());
-    let hood_of = |a: usize| neighbourhood(points, rows, rows[a * rows.len() / anchors], size);
-    let hoods: Vec<Vec<usize>> = threads.map_n(anchors, hood_of);
+    // (anchor, the rows its neighbourhood is taken among), each spread evenly in input order.
+    let spread = |among: &[usize], count: usize| -> Vec<usize> {
+        if among.len() < size {
+            return Vec::new();
+        }
+        let count = count.min(among.len());
+        (0..count).map(|a| among[a * among.len() / count]).collect()
+    };
+    let starts: Vec<(usize, &[usize])> = spread(rows, ANCHORS)
+        .into_iter()
+        .map(|a| (a, rows))
+        .chain(
+            spread(unexplained, UNEXPLAINED_ANCHORS)
+                .into_iter()
+                .map(|a| (a, unexplained)),
+        )
+        .collect();
+    let anchors = starts.len();
+    let hoods: Vec<Vec<usize>> = threads.map_n(anchors, |a| {
+        let (anchor, among) = starts[a];
+        neighbourhood(points, among, anchor, size)
+    });
     let known = |out: &[Model], hood: &[usize], name: &str| {
         out.iter().any(|m| {
             m.type_name() == name && {
@@ -401,6 +432,89 @@ mod tests {
         assert_eq!(moved(&[0, 6, 2, 1]), vec![(1, 6), (3, 1)]);
     }
 
+    /// A dense line (y = 0, 400 points), a dense circle (radius 5 around (0, 8), 150 points)
+    /// and a sparse circle crossing the line (radius 3 around (4, 1.5), 20 points), in that
+    /// order, with deterministic noise of about 0.01.
+    fn a_sparse_circle_beside_dense_curves() -> PointSet {
+        let noise = |i: usize| 0.01 * (((i * 7919) % 101) as f64 / 50.0 - 1.0);
+        let mut values = Vec::new();
+        for i in 0..400 {
+            values.extend([-30.0 + 60.0 * i as f64 / 400.0, noise(i)]);
+        }
+        for (first, m, (cx, cy, r)) in [(400, 150, (0.0, 8.0, 5.0)), (550, 20, (4.0, 1.5, 3.0))] {
+            for j in 0..m {
+                let t = j as f64 * std::f64::consts::TAU / m as f64;
+                let r = r + noise(first + j);
+                values.extend([cx + r * t.cos(), cy + r * t.sin()]);
+            }
+        }
+        PointSet::from_flat(crate::data::Kind::Points2d, 2, values).unwrap()
+    }
+
+    #[test]
+    fn a_sparse_curve_beside_dense_ones_is_proposed_from_the_points_no_model_explains() {
+        let points = a_sparse_circle_beside_dense_curves();
+        let rows: Vec<usize> = (0..points.len()).collect();
+        let (line, circle) = (
+            Model::Line {
+                a: 0.0,
+                b: 1.0,
+                c: 0.0,
+            },
+            Model::Circle {
+                cx: 0.0,
+                cy: 8.0,
+                r: 5.0,
+            },
+        );
+        let threshold = 0.05;
+        let unexplained: Vec<usize> = rows
+            .iter()
+            .copied()
+            .filter(|&i| {
+                [&line, &circle]
+                    .iter()
+                    .all(|m| m.residual(points.row(i)) >= threshold)
+            })
+            .collect();
+        assert!(unexplained.iter().all(|&i| i >= 550), "{unexplained:?}");
+        // How many of the sparse circle's points the best hypothesis explains.
+        let best = |hypotheses: &[Model]| {
+            hypotheses
+                .iter()
+                .map(|h| explained(&points, &(550..570).collect::<Vec<_>>(), h, threshold).len())
+                .max()
+                .unwrap_or(0)
+        };
+        let one = Threads::default();
+        // Among every row, the nearest rows of an anchor on the sparse circle are the line's.
+        let among_all = propose(&points, &rows, &[], Family::Curves, threshold, &one);
+        assert!(best(&among_all) < 15, "{}", best(&among_all));
+        let with = propose(
+            &points,
+            &rows,
+            &unexplained,
+            Family::Curves,
+            threshold,
+            &one,
+        );
+        assert_eq!(best(&with), 20);
+        // And the search swaps it in for a second copy of the line.
+        let swapped = swaps(
+            &points,
+            &[Some(&line), Some(&line), Some(&circle)],
+            Family::Curves,
+            threshold,
+            0,
+            &one,
+        );
+        assert_eq!(swapped.len(), 1);
+        let Model::Circle { cx, cy, r } = swapped[0].fit.model else {
+            panic!("{:?}", swapped[0].fit.model);
+        };
+        assert!((cx - 4.0).abs() < 0.01 && (cy - 1.5).abs() < 0.01 && (r - 3.0).abs() < 0.01);
+    }
+
     #[test]
     fn large_sets_are_seen_evenly_and_tiny_ones_propose_nothing() {
         let rows = seen_rows(10 * MAX_ROWS);
@@ -417,7 +531,7 @@ mod tests {
         )
         .unwrap();
         let one = Threads::default();
-        assert!(propose(&three, &[0, 1, 2], Family::Curves, 0.1, &one).is_empty());
+        assert!(propose(&three, &[0, 1, 2], &[0, 1, 2], Family::Curves, 0.1, &one).is_empty());
         let line = Model::Line {
             a: 0.0,
             b: 1.0,
