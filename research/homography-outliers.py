@@ -4,9 +4,11 @@ Needs a running server.
 
   python3 research/homography-outliers.py PORT [--seeds N] [--planes P] [--outliers R] [--list]
 
-Each plane's points are drawn in its own region of a 640 x 480 image (a plane is seen as one
-patch), mapped by a homography near a small camera motion, with 1 px noise in both images;
-outliers are uniform over both images, R times the inliers (default 0.25)."""
+Each plane's points are drawn in its own region of a 640 x 480 image (a random rectangle inside
+one of P vertical strips: a plane is seen as one patch, and one pixel sees one surface), mapped
+by a homography near a small camera motion, with 1 px noise in both images; outliers are uniform
+over both images, R times the inliers (default 0.25). --whole draws every plane over the whole
+first image instead, which no single camera sees. The structures' RMS is printed with --list."""
 import argparse, random
 
 import fitting
@@ -51,8 +53,9 @@ def one(seed):
     rows, labels = [], []
     for j in range(args.planes):
         h = homography(rng)
-        x0, y0 = rng.uniform(0, W * 0.6), rng.uniform(0, H * 0.6)
-        w, hh = rng.uniform(0.3, 0.4) * W, rng.uniform(0.3, 0.4) * H
+        strip = W / args.planes
+        x0, y0 = j * strip + rng.uniform(0, 0.2) * strip, rng.uniform(0, 0.3) * H
+        w, hh = rng.uniform(0.6, 0.8) * strip, rng.uniform(0.5, 0.7) * H
         if args.whole:
             x0, y0, w, hh = 0, 0, W, H
         for _ in range(args.per_plane):

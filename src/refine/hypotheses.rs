@@ -43,7 +43,7 @@ use crate::data::PointSet;
 use crate::geometry::{self, Family, Fit, Model};
 use crate::threads::Threads;
 
-/// Neighbourhoods proposed per fit.
+/// Neighbourhoods proposed per fit, spread over every seen point.
 pub const ANCHORS: usize = 32;
 /// Points per neighbourhood, in units of the largest minimal sample of the family's types.
 pub const NEIGHBOURHOOD_FACTOR: usize = 2;
