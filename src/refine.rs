@@ -566,11 +566,16 @@ fn assign(
         {
             return here;
         }
-        let (j, r) = live
-            .iter()
-            .map(|(j, m)| (*j, m.residual(row)))
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .unwrap_or((live[0].0, f64::INFINITY));
+        // The nearest structure; each residual capped at the nearest so far, which spares an
+        // ellipse's foot-point search for the points far from it.
+        let mut nearest = (live[0].0, f64::INFINITY);
+        for (j, m) in &live {
+            let r = m.residual_capped(row, nearest.1);
+            if r < nearest.1 {
+                nearest = (*j, r);
+            }
+        }
+        let (j, r) = nearest;
         if outliers && (r.is_nan() || r > threshold) {
             -1
         } else {
