@@ -348,3 +348,18 @@ async fn the_router_serves_exactly_the_documented_routes_and_methods() {
         routed
     );
 }
+
+#[test]
+fn every_bundled_example_is_listed() {
+    let spec = spec();
+    let file = &spec["paths"]["/examples/{file}"]["get"]["parameters"][0];
+    assert_eq!(file["name"].as_str(), Some("file"));
+    let listed: Vec<&str> = file["schema"]["enum"]
+        .as_array()
+        .expect("an enum of example files")
+        .iter()
+        .map(|f| f.as_str().unwrap())
+        .collect();
+    let served: Vec<&str> = multifit::api::page::EXAMPLES.iter().map(|e| e.0).collect();
+    assert_eq!(listed, served, "the enum of /examples/{{file}}");
+}

@@ -91,6 +91,8 @@ error_codes! {
         "The request queue is full; retry after Retry-After seconds.";
     Internal = "internal", INTERNAL_SERVER_ERROR,
         "An unexpected failure in the server.";
+    BodyTimeout = "body_timeout", REQUEST_TIMEOUT,
+        "The request body did not arrive within --request-timeout-ms.";
     Timeout = "timeout", SERVICE_UNAVAILABLE,
         "The fit did not finish within --request-timeout-ms, queueing included.";
     NotReady = "not_ready", SERVICE_UNAVAILABLE,
@@ -352,7 +354,26 @@ where
             .extensions()
             .get::<super::routes::BodyLimit>()
             .map(|l| l.0);
-        let bytes = Bytes::from_request(req, state).await.map_err(|e| {
+        let deadline = req
+            .extensions()
+            .get::<super::routes::BodyDeadline>()
+            .map(|d| d.0);
+        let read = Bytes::from_request(req, state);
+        let read = match deadline {
+            // A client that stalls mid-body is answered, not waited for.
+            Some(d) => tokio::time::timeout(d, read).await.map_err(|_| {
+                ApiError::new(
+                    ErrorCode::BodyTimeout,
+                    format!(
+                        "the request body did not arrive within the server's timeout of {} ms \
+                         (multifit-server --request-timeout-ms)",
+                        d.as_millis()
+                    ),
+                )
+            })?,
+            None => read.await,
+        };
+        let bytes = read.map_err(|e| {
             if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
                 let message = match limit {
                     Some(n) => format!(

@@ -10,13 +10,15 @@
 //! when `Content-Length` already declares more than the byte bound nothing is read. The body of
 //! a request that sent `Expect: 100-continue` is drained only if the handler began to read it
 //! (the server has then sent `100 Continue`, and the client sends the body); otherwise its
-//! client waits for the answer without sending the body, and reading would ask for it.
+//! client waits for the answer without sending the body, and reading would ask for it. A body
+//! that stopped arriving (answered `body_timeout`) is not drained.
 
 use std::pin::Pin;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::task::{Context, Poll};
 use std::time::Duration;
 
+use super::error::ErrorCode;
 use axum::body::{Body, Bytes, HttpBody};
 use axum::extract::{Request, State};
 use axum::http::{HeaderMap, header};
@@ -48,6 +50,10 @@ pub async fn linger(State(body_limit): State<usize>, req: Request, next: Next) -
         unread: unread.clone(),
     });
     let response = next.run(Request::from_parts(parts, body)).await;
+    if response.extensions().get::<ErrorCode>() == Some(&ErrorCode::BodyTimeout) {
+        // The client stopped sending: nothing would arrive to drain.
+        return response;
+    }
     let rest = unread.lock().unwrap_or_else(PoisonError::into_inner).take();
     if let Some(rest) = rest {
         drain(rest, cap).await;

@@ -163,6 +163,11 @@ pub const ENDPOINTS: [&str; ROUTES.len()] = {
 #[derive(Debug, Clone, Copy)]
 pub struct BodyLimit(pub usize);
 
+/// The longest a JSON body may take to arrive (the request timeout): past it, 408
+/// ([`super::error::ApiJson`]).
+#[derive(Debug, Clone, Copy)]
+pub struct BodyDeadline(pub std::time::Duration);
+
 /// The full router with every layer, over `state`: the routes of [`ROUTES`], JSON errors for
 /// an unknown route or method, metrics ([`track`]) and the lingering close of request bodies
 /// left unread ([`super::linger`]).
@@ -187,6 +192,7 @@ pub fn router(state: Shared, body_limit: usize) -> Router {
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(body_limit))
         .layer(axum::Extension(BodyLimit(body_limit)))
+        .layer(axum::Extension(BodyDeadline(state.timeout)))
         .layer(middleware::from_fn_with_state(state.clone(), track))
         .layer(middleware::from_fn_with_state(body_limit, linger))
         .layer(TraceLayer::new_for_http().make_span_with(|req: &axum::http::Request<_>| {

@@ -188,7 +188,7 @@ pub fn rejection_reason(code: ErrorCode) -> Option<&'static str> {
         E::BodyTooLarge => "too_large",
         E::UnsupportedMediaType => "unsupported_media_type",
         E::Overloaded => "overloaded",
-        E::Timeout => "timeout",
+        E::Timeout | E::BodyTimeout => "timeout",
         E::InvalidRequest
         | E::InvalidPoints
         | E::InvalidClustering

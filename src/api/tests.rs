@@ -117,6 +117,25 @@ fn post_to(uri: &str, value: &Value) -> Request<Body> {
     request(Method::POST, uri, Some("application/json"), body)
 }
 
+/// A body that sends `first` and then never another byte: a client stalled mid-request.
+fn body_stalled_after(first: &'static [u8]) -> Body {
+    struct Stalled(Option<axum::body::Bytes>);
+    impl http_body::Body for Stalled {
+        type Data = axum::body::Bytes;
+        type Error = std::convert::Infallible;
+        fn poll_frame(
+            mut self: std::pin::Pin<&mut Self>,
+            _: &mut std::task::Context<'_>,
+        ) -> std::task::Poll<Option<Result<http_body::Frame<Self::Data>, Self::Error>>> {
+            match self.0.take() {
+                Some(data) => std::task::Poll::Ready(Some(Ok(http_body::Frame::data(data)))),
+                None => std::task::Poll::Pending,
+            }
+        }
+    }
+    Body::new(Stalled(Some(axum::body::Bytes::from_static(first))))
+}
+
 fn get(uri: &str) -> Request<Body> {
     request(Method::GET, uri, None, Body::empty())
 }
@@ -606,6 +625,17 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
     );
     drop(busy);
     seen.insert(E::Timeout);
+
+    // A client that stops sending its body: answered within the timeout, not waited for.
+    let stalled = body_stalled_after(b"{\"kind\": \"trajectories\", \"points\": [[0, ");
+    let request = request(Method::POST, "/v1/fit", Some("application/json"), stalled);
+    let slow_app = service(&slow);
+    let answered = tokio::time::timeout(Duration::from_secs(2), send(&slow_app, request));
+    let answer = answered
+        .await
+        .expect("answered before the test's own deadline");
+    check_error("stalled body", &answer, E::BodyTimeout);
+    seen.insert(E::BodyTimeout);
 
     // Before the models are loaded.
     let loading = Arc::new(AppState::new(LIMITS, 1, 1, Duration::from_secs(5)));
