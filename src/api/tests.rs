@@ -747,6 +747,38 @@ async fn a_nan_in_the_body_is_named_as_not_json() {
     }
 }
 
+/// A whole number the API takes (k, seed) sent too large or with a fraction is named as such.
+#[tokio::test]
+async fn a_number_that_is_not_a_whole_number_in_range_is_named() {
+    let state = state(1, 4, Duration::from_secs(60));
+    let app = service(&state);
+    for (field, value, hinted) in [
+        ("k", "1000000000000000000000000000000", true),
+        ("seed", "18446744073709551616", true),
+        ("k", "2.5", true),
+        ("k", "\"two\"", false),
+    ] {
+        let body =
+            format!(r#"{{"kind":"points2d","points":[[0,0],[1,1],[2,2]],"{field}":{value}}}"#);
+        let req = request(
+            Method::POST,
+            "/v1/fit",
+            Some("application/json"),
+            Body::from(body),
+        );
+        let (status, code, answer) = send(&app, req).await;
+        assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{field}: {value}");
+        assert_eq!(code, Some(ErrorCode::InvalidRequest), "{field}: {value}");
+        let message = answer["error"]["message"].as_str().unwrap();
+        assert!(message.contains(field), "{message}");
+        assert_eq!(
+            message.contains("a whole number is expected"),
+            hinted,
+            "{message}"
+        );
+    }
+}
+
 /// Unrefined, a curve or correspondence fit may answer its network's outlier group -1, which
 /// the card's `outliers` allows by default: the request may say so, or turn it off.
 #[tokio::test]
