@@ -136,6 +136,16 @@ fn body_stalled_after(first: &'static [u8]) -> Body {
     Body::new(Stalled(Some(axum::body::Bytes::from_static(first))))
 }
 
+/// `POST /v1/fit` of `body` as it is, with the JSON content type.
+fn post_text(body: impl Into<Body>) -> Request<Body> {
+    request(
+        Method::POST,
+        "/v1/fit",
+        Some("application/json"),
+        body.into(),
+    )
+}
+
 fn get(uri: &str) -> Request<Body> {
     request(Method::GET, uri, None, Body::empty())
 }
@@ -729,13 +739,7 @@ async fn a_nan_in_the_body_is_named_as_not_json() {
         (r#"{"kind":"points2d","points":[[0"#, false),
         (r#"{"kind":"points2d","points":[[nan,1],[0,0]]}"#, false),
     ] {
-        let req = request(
-            Method::POST,
-            "/v1/fit",
-            Some("application/json"),
-            Body::from(body),
-        );
-        let (status, code, answer) = send(&app, req).await;
+        let (status, code, answer) = send(&app, post_text(body)).await;
         assert_eq!(status, StatusCode::BAD_REQUEST, "{body}");
         assert_eq!(code, Some(ErrorCode::MalformedJson), "{body}");
         let message = answer["error"]["message"].as_str().unwrap();
@@ -760,13 +764,7 @@ async fn a_number_that_is_not_a_whole_number_in_range_is_named() {
     ] {
         let body =
             format!(r#"{{"kind":"points2d","points":[[0,0],[1,1],[2,2]],"{field}":{value}}}"#);
-        let req = request(
-            Method::POST,
-            "/v1/fit",
-            Some("application/json"),
-            Body::from(body),
-        );
-        let (status, code, answer) = send(&app, req).await;
+        let (status, code, answer) = send(&app, post_text(body)).await;
         assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{field}: {value}");
         assert_eq!(code, Some(ErrorCode::InvalidRequest), "{field}: {value}");
         let message = answer["error"]["message"].as_str().unwrap();
