@@ -19,7 +19,8 @@
 //!    caller's units); points reassigned to the structure they fit best, outliers labelled −1.
 //!    With K chosen, the k + 1 clustering is refined too and answers where it parts structures
 //!    that pooled two ([`refine_chosen`]); with a k given, where the outliers take a group of
-//!    their own.
+//!    their own, and the clustering K chosen would give answers where its k structures are far
+//!    less noisy ([`crate::refine::replaces_given`]).
 //! 6. **answer** ([`FitOutcome`]): labels, K, structures, the residual curve and the stage
 //!    timings.
 
@@ -561,6 +562,9 @@ fn fit_counting(
     let t1 = Instant::now();
     let mut clustering = cluster(model, &embedding, params)?;
     let t2 = Instant::now();
+    // With k given: the K chosen clustering's answer, when it replaced the k clustering's
+    // (its K, its noise, the k answer's noise).
+    let mut replaced = None;
     let (labels, structures, k) = match &refine_params {
         Some(r) => {
             let mut refined = match given {
@@ -585,6 +589,20 @@ fn fit_counting(
                 if found <= k && found >= refined.structures.len() {
                     clustering = both_ks(&clustering, wider);
                     refined = again;
+                }
+            }
+            // Where the k clustering mixed structures, its groups set a noise level under which
+            // refinement cannot part them: the clustering K chosen would give, refined as a
+            // chosen K (structures may be added, up to k_max, or merge), may reach the k
+            // structures at a far lower noise ([`refine::replaces_given`]).
+            if let Some(k) = given {
+                let auto = params.with_chosen_k(model.card.selection, params.k_max().max(k));
+                let chosen = cluster(model, &embedding, &auto)?;
+                let other = refine(model, points, &chosen, r);
+                if refine::replaces_given(&refined, &other, k, points.len()) {
+                    replaced = Some((chosen.k, other.noise(), refined.noise()));
+                    clustering = chosen;
+                    refined = other;
                 }
             }
             let k = refined.structures.len();
@@ -623,6 +641,13 @@ fn fit_counting(
     });
     if let Selection::Fixed(asked) = params.selection() {
         warnings.extend(fewer_than_asked(asked, k, refine_params.is_some()));
+    }
+    if let Some((from, noise, given_noise)) = replaced {
+        warnings.push(format!(
+            "the {k} structures answered were refined from the clustering into {from} groups \
+             that K chosen would give: their noise level is {noise:.3}, against {given_noise:.3} \
+             for those refined from the {k} groups asked (which mix structures)"
+        ));
     }
     Ok(FitOutcome {
         warnings,

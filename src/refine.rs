@@ -183,6 +183,23 @@ pub const SPLIT_NOISE_FACTOR: f64 = 2.0;
 /// answer's.
 pub const SPLIT_MORE_OUTLIERS: f64 = 0.05;
 
+/// The most outliers, as a share of the points, that the answer K chosen would give may flag
+/// beyond a given k's answer for [`replaces_given`].
+pub const GIVEN_MORE_OUTLIERS: f64 = 0.2;
+
+/// Whether `chosen` (refined from the clustering K chosen would give) replaces `given` (refined
+/// from the caller's k clusters): exactly `k` structures, each measuring a noise, a noise
+/// ([`Refined::noise`]) finite and at most 1 / [`SPLIT_NOISE_FACTOR`] of `given`'s, and at most
+/// [`GIVEN_MORE_OUTLIERS`] of the `n` points more as outliers. Where the k clustering mixed the
+/// structures, its groups set a wide noise level under which refinement cannot part them.
+pub fn replaces_given(given: &Refined, chosen: &Refined, k: usize, n: usize) -> bool {
+    chosen.structures.len() == k
+        && chosen.measured().count() == k
+        && chosen.noise().is_finite()
+        && chosen.noise() * SPLIT_NOISE_FACTOR <= given.noise()
+        && chosen.outliers() as f64 <= given.outliers() as f64 + GIVEN_MORE_OUTLIERS * n as f64
+}
+
 /// Whether `wider` (refined from one more cluster) splits a structure that `answer` pooled: it
 /// has at least as many structures that measure a noise, its noise ([`Refined::noise`]) is
 /// finite and at most 1 / [`SPLIT_NOISE_FACTOR`] of `answer`'s, and it flags at most
@@ -977,6 +994,59 @@ mod tests {
             start: 1,
             frozen: false,
         })
+    }
+
+    #[test]
+    fn the_answer_k_chosen_would_give_replaces_a_given_k_only_with_k_far_quieter_structures() {
+        let structure = |rms: f64| Structure {
+            label: 0,
+            model: Model::Circle {
+                cx: 0.0,
+                cy: 0.0,
+                r: 1.0,
+            },
+            inliers: 50,
+            rms,
+        };
+        let answer = |rms: &[f64], outliers: usize| Refined {
+            labels: vec![-1; outliers],
+            structures: rms.iter().map(|&r| structure(r)).collect(),
+            sigma: 1.0,
+        };
+        let given = answer(&[10.0, 12.0, 9.0], 3);
+        // k structures at a tenth of the noise, a few more outliers: replaces.
+        assert!(replaces_given(
+            &given,
+            &answer(&[1.0, 1.2, 0.9], 30),
+            3,
+            200
+        ));
+        // Not k structures.
+        assert!(!replaces_given(&given, &answer(&[1.0, 1.2], 30), 3, 200));
+        assert!(!replaces_given(
+            &given,
+            &answer(&[1.0, 1.2, 0.9, 1.0], 30),
+            3,
+            200
+        ));
+        // Not half the noise.
+        assert!(!replaces_given(
+            &given,
+            &answer(&[6.0, 6.0, 6.0], 3),
+            3,
+            200
+        ));
+        // Quiet by answering more than a fifth of the points -1.
+        assert!(!replaces_given(
+            &given,
+            &answer(&[1.0, 1.2, 0.9], 3 + 41),
+            3,
+            200
+        ));
+        // A structure that measures no noise does not count.
+        let mut bare = answer(&[1.0, 1.2, 0.9], 3);
+        bare.structures[2].inliers = 3;
+        assert!(!replaces_given(&given, &bare, 3, 200));
     }
 
     #[test]

@@ -531,6 +531,30 @@ fn a_k_given_counts_the_structures_and_the_outliers_are_answered_apart() {
 }
 
 #[test]
+fn a_given_k_is_answered_from_the_clustering_k_chosen_would_give_where_that_is_far_quieter() {
+    // napiera with adelaide-homography (refined) and k = 2: the 2-group clustering mixes the
+    // planes and its groups set a wide noise level; the clustering SOD chooses, refined, gives
+    // the 2 planes at under half that noise.
+    let server = Server::start(&[]);
+    let f = dataset("adelaidermf/napiera.json");
+    let body = fit_body(&f, json!({"model": "adelaide-homography", "k": 2}));
+    let r = server.post_json("/v1/fit", &body);
+    assert_eq!(r.status, 200, "{}", r.text());
+    let v = r.json();
+    let n = f["points"].as_array().unwrap().len();
+    assert_eq!(check_fit(&v, n), 2);
+    let error = error_rate(&truth(&f), &labels(&v));
+    assert!(error < 0.08, "{error}");
+    let warned = v["warnings"].as_array().unwrap();
+    assert!(
+        warned
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("that K chosen would give")),
+        "{warned:?}"
+    );
+}
+
+#[test]
 fn a_chosen_k_counts_the_structures_and_the_outliers_are_answered_apart() {
     // The default model for correspondences (adelaide-fundamental, unrefined) chooses K among
     // groups one of which is the outliers its network learned as a group: that group is

@@ -117,6 +117,14 @@ impl ClusterParams {
     pub fn seed(&self) -> u64 {
         self.seed
     }
+    /// The same parameters with K chosen by `selection` (not fixed) among 1..=`k_max` (>= 1).
+    pub fn with_chosen_k(&self, selection: Selection, k_max: usize) -> Self {
+        Self {
+            selection,
+            k_max: k_max.max(1),
+            ..self.clone()
+        }
+    }
     /// The same parameters with K fixed at `k` (>= 1; every other field was validated).
     pub fn with_fixed_k(&self, k: usize) -> Result<Self, ClusterError> {
         if k == 0 {
