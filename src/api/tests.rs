@@ -146,6 +146,15 @@ fn post_text(body: impl Into<Body>) -> Request<Body> {
     )
 }
 
+/// The error message `app` answers `body` with (posted as it is), having checked its status
+/// and code.
+async fn rejected(app: &Router, body: &str, status: StatusCode, code: ErrorCode) -> String {
+    let (got, got_code, answer) = send(app, post_text(body.to_string())).await;
+    assert_eq!(got, status, "{body}");
+    assert_eq!(got_code, Some(code), "{body}");
+    answer["error"]["message"].as_str().unwrap().to_string()
+}
+
 fn get(uri: &str) -> Request<Body> {
     request(Method::GET, uri, None, Body::empty())
 }
@@ -739,10 +748,13 @@ async fn a_nan_in_the_body_is_named_as_not_json() {
         (r#"{"kind":"points2d","points":[[0"#, false),
         (r#"{"kind":"points2d","points":[[nan,1],[0,0]]}"#, false),
     ] {
-        let (status, code, answer) = send(&app, post_text(body)).await;
-        assert_eq!(status, StatusCode::BAD_REQUEST, "{body}");
-        assert_eq!(code, Some(ErrorCode::MalformedJson), "{body}");
-        let message = answer["error"]["message"].as_str().unwrap();
+        let message = rejected(
+            &app,
+            body,
+            StatusCode::BAD_REQUEST,
+            ErrorCode::MalformedJson,
+        )
+        .await;
         assert_eq!(
             message.contains("NaN and Infinity are not JSON numbers"),
             hinted,
@@ -764,10 +776,13 @@ async fn a_number_that_is_not_a_whole_number_in_range_is_named() {
     ] {
         let body =
             format!(r#"{{"kind":"points2d","points":[[0,0],[1,1],[2,2]],"{field}":{value}}}"#);
-        let (status, code, answer) = send(&app, post_text(body)).await;
-        assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{field}: {value}");
-        assert_eq!(code, Some(ErrorCode::InvalidRequest), "{field}: {value}");
-        let message = answer["error"]["message"].as_str().unwrap();
+        let message = rejected(
+            &app,
+            &body,
+            StatusCode::UNPROCESSABLE_ENTITY,
+            ErrorCode::InvalidRequest,
+        )
+        .await;
         assert!(message.contains(field), "{message}");
         assert_eq!(
             message.contains("a whole number is expected"),
