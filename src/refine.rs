@@ -7,11 +7,14 @@
 //!
 //! 1. every point goes to the structure with the smallest residual r_j(x) (a geometric distance
 //!    in the caller's units: all structures of a fit measure in the same units), except that a
-//!    point whose residual to its current structure is within `stay` × σ
-//!    ([`RefineParams::stay`], the model card's `refine_stay`, capped at τ) keeps it: within
-//!    the noise the geometry cannot tell the structures apart, and the learned label carries
-//!    what it saw (a structure the hypotheses stage swapped in keeps, in the first round, the
-//!    learned points that fit it so closely);
+//!    point keeps its current structure while its residual there is within `stay` × σ
+//!    ([`RefineParams::stay`], the model card's `refine_stay`, capped at τ), or exceeds the
+//!    smallest by at most `margin` × σ ([`RefineParams::margin`], the card's `refine_margin`):
+//!    within the noise the geometry cannot tell the structures apart, and the learned label
+//!    carries what it saw (a structure the hypotheses stage swapped in keeps, in the first
+//!    round, the learned points that fit it so closely). Motion subspaces take a margin of
+//!    0.1 σ: on short clips nearest-subspace reassignment moves tracks on differences far
+//!    inside the noise, and they drift to the wrong motion;
 //! 2. a point whose smallest residual exceeds the outlier threshold τ is labelled −1 (when
 //!    outliers are allowed);
 //! 3. every structure is fitted again on its points, keeping its model type (a line stays a
@@ -108,6 +111,9 @@ pub struct RefineParams {
     /// A point stays with its structure while its residual there is within this many σ, even
     /// where another structure is nearer; 0: every point goes to the nearest.
     pub stay: f64,
+    /// A point leaves its structure only for one whose residual is smaller by more than this
+    /// many σ; 0: for any nearer one.
+    pub margin: f64,
 }
 
 impl Default for RefineParams {
@@ -117,6 +123,7 @@ impl Default for RefineParams {
             threshold: None,
             hypotheses: true,
             stay: 0.0,
+            margin: 0.0,
         }
     }
 }
@@ -400,6 +407,7 @@ pub fn refine_on(
             .unwrap_or(OUTLIER_SIGMAS * sigma)
             .max(f64::MIN_POSITIVE);
         let stay = (params.stay * sigma).min(threshold);
+        let margin = params.margin * sigma;
         if params.hypotheses && family != Family::Subspace {
             let live: Vec<Option<&Model>> = groups
                 .iter()
@@ -431,14 +439,12 @@ pub fn refine_on(
                 .unwrap_or_else(|| fit_on(idx))
         };
         let reassign = |current: &[i64], groups: &[Option<Group>]| {
-            assign(
-                points,
-                current,
-                groups,
-                params.outliers,
-                (threshold, stay),
-                threads,
-            )
+            let radii = Radii {
+                threshold,
+                stay,
+                margin,
+            };
+            assign(points, current, groups, params.outliers, radii, threads)
         };
         let mut moved = false;
         for _ in 0..MAX_ITERATIONS {
@@ -545,15 +551,26 @@ fn noise_level(groups: &[Option<Group>]) -> f64 {
     s[(s.len() - 1) / 2]
 }
 
-/// Every point to its nearest live structure (−1 past `threshold` when outliers are allowed),
-/// except that a point within `stay` of its current live structure keeps it; points of frozen
-/// groups stay.
+/// The radii of one assignment, in the caller's units.
+#[derive(Debug, Clone, Copy)]
+struct Radii {
+    /// Past it a point is an outlier (when outliers are allowed).
+    threshold: f64,
+    /// Within it a point keeps its structure.
+    stay: f64,
+    /// A point leaves its structure only for one nearer by more than this.
+    margin: f64,
+}
+
+/// Every point to its nearest live structure (−1 past the threshold when outliers are
+/// allowed), except that a point keeps its current live structure while its residual there is
+/// within `stay`, or within `margin` of the nearest; points of frozen groups stay.
 fn assign(
     points: &PointSet,
     current: &[i64],
     groups: &[Option<Group>],
     outliers: bool,
-    (threshold, stay): (f64, f64),
+    radii: Radii,
     threads: &Threads,
 ) -> Vec<i64> {
     let live: Vec<(usize, geometry::Prepared)> = groups
@@ -565,6 +582,7 @@ fn assign(
                 .map(|g| (j, g.fit.model.prepared()))
         })
         .collect();
+    let keeps = radii.stay > 0.0 || radii.margin > 0.0;
     threads.map_n(points.len(), |i| {
         let here = current[i];
         let frozen = here >= 0
@@ -576,11 +594,12 @@ fn assign(
             return if frozen || !outliers { here } else { -1 };
         }
         let row = points.row(i);
-        if stay > 0.0
-            && here >= 0
-            && let Some((_, m)) = live.iter().find(|&&(j, _)| j as i64 == here)
-            && m.residual(row) <= stay
-        {
+        // The residual to the point's own live structure, where a radius may keep it there.
+        let own = live
+            .iter()
+            .find(|&&(j, _)| keeps && j as i64 == here)
+            .map(|(_, m)| m.residual(row));
+        if own.is_some_and(|r| r <= radii.stay) {
             return here;
         }
         // The nearest structure; each residual capped at the nearest so far, which spares an
@@ -592,8 +611,15 @@ fn assign(
                 nearest = (*j, r);
             }
         }
+        if let Some(r) = own
+            && radii.margin > 0.0
+            && r - nearest.1 <= radii.margin
+            && (!outliers || r <= radii.threshold)
+        {
+            return here;
+        }
         let (j, r) = nearest;
-        if outliers && (r.is_nan() || r > threshold) {
+        if outliers && (r.is_nan() || r > radii.threshold) {
             -1
         } else {
             j as i64
@@ -1057,7 +1083,12 @@ mod tests {
             PointSet::from_flat(Kind::Points2d, 2, vec![0.0, 0.45, 0.0, 0.2, 0.0, -3.0]).unwrap();
         let current = [1, 1, 1];
         let threads = Threads::default();
-        let with = |stay: f64| assign(&points, &current, &groups, true, (2.5, stay), &threads);
+        let radii = |stay: f64| Radii {
+            threshold: 2.5,
+            stay,
+            margin: 0.0,
+        };
+        let with = |stay: f64| assign(&points, &current, &groups, true, radii(stay), &threads);
         // Nearest: the first two go to y = 0; the third is past the threshold from both lines.
         assert_eq!(with(0.0), [0, 0, -1]);
         // Within 0.6 of y = 1 the first stays (0.55 away), the second (0.8) does not.
@@ -1072,9 +1103,35 @@ mod tests {
         let groups = [line_group(0.0), line_group(1.0), None, frozen];
         let points = PointSet::from_flat(Kind::Points2d, 2, [0.0, 0.45].repeat(3)).unwrap();
         for stay in [0.0, 0.6, 10.0] {
-            let got = assign(&points, &[-1, 2, 3], &groups, true, (2.5, stay), &threads);
+            let got = assign(&points, &[-1, 2, 3], &groups, true, radii(stay), &threads);
             assert_eq!(got, [0, 0, 3], "stay {stay}");
         }
+    }
+
+    #[test]
+    fn a_point_leaves_its_structure_only_for_one_nearer_by_more_than_the_margin() {
+        // Lines y = 0 and y = 1; every point starts with y = 1. At y = 0.45 the point is 0.55
+        // from its line and 0.45 from the other (0.1 nearer); at y = 0.2, 0.6 nearer.
+        let groups = [line_group(0.0), line_group(1.0)];
+        let points = PointSet::from_flat(Kind::Points2d, 2, vec![0.0, 0.45, 0.0, 0.2]).unwrap();
+        let threads = Threads::default();
+        let with = |margin: f64, outliers: bool, threshold: f64| {
+            let radii = Radii {
+                threshold,
+                stay: 0.0,
+                margin,
+            };
+            assign(&points, &[1, 1], &groups, outliers, radii, &threads)
+        };
+        assert_eq!(with(0.0, true, 2.5), [0, 0]);
+        assert_eq!(with(0.05, true, 2.5), [0, 0]);
+        assert_eq!(with(0.2, true, 2.5), [1, 0]);
+        assert_eq!(with(1.0, true, 2.5), [1, 1]);
+        // The margin keeps no point past the outlier threshold: the first (0.55 from its line)
+        // goes to the nearer line within it, the second to the nearer line too.
+        assert_eq!(with(1.0, true, 0.5), [0, 0]);
+        // Without outliers the threshold does not bound it.
+        assert_eq!(with(1.0, false, 0.5), [1, 1]);
     }
 
     #[test]

@@ -54,6 +54,8 @@ pub enum CardError {
     SparseAbove(f64),
     #[error("refine_stay must be a finite number of noise levels, at least 0, got {0}")]
     RefineStay(f64),
+    #[error("refine_margin must be a finite number of noise levels, at least 0, got {0}")]
+    RefineMargin(f64),
     #[error(transparent)]
     Architecture(ModelError),
 }
@@ -152,6 +154,10 @@ pub struct ModelCard {
     /// where another structure is nearer ([`RefineParams::stay`]); 0: always the nearest.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub refine_stay: f64,
+    /// Refinement moves a point to another structure only where that one fits it better by
+    /// more than this many σ ([`RefineParams::margin`]); 0: wherever another is nearer.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub refine_margin: f64,
     /// The models a structure may follow; default by kind: curves for points2d, fundamental
     /// (or homography where GRIC prefers it) for correspondences, subspaces for trajectories.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -304,14 +310,15 @@ impl ModelCard {
         self.refine || self.refine_from_frames.is_some_and(long)
     }
 
-    /// How fits of this model refine by default: its outliers and stay settings, the outlier
-    /// threshold from the data, hypotheses on.
+    /// How fits of this model refine by default: its outliers, stay and margin settings, the
+    /// outlier threshold from the data, hypotheses on.
     pub fn refine_params(&self) -> RefineParams {
         RefineParams {
             outliers: self.outliers,
             threshold: None,
             hypotheses: true,
             stay: self.refine_stay,
+            margin: self.refine_margin,
         }
     }
 
@@ -378,6 +385,9 @@ impl ModelCard {
         }
         if !(self.refine_stay.is_finite() && self.refine_stay >= 0.0) {
             return Err(CardError::RefineStay(self.refine_stay));
+        }
+        if !(self.refine_margin.is_finite() && self.refine_margin >= 0.0) {
+            return Err(CardError::RefineMargin(self.refine_margin));
         }
         if let Some(sparse) = &self.sparse {
             let spacing = self.spacing.unwrap_or(f64::NAN);
@@ -453,6 +463,7 @@ pub fn card_for(
         refine_from_frames: None,
         outliers: true,
         refine_stay: 0.0,
+        refine_margin: 0.0,
         geometry: None,
         spacing: None,
         sparse: None,
@@ -494,22 +505,25 @@ mod tests {
     }
 
     #[test]
-    fn the_stay_setting_reaches_refinement_and_bad_values_are_refused() {
+    fn the_stay_and_margin_settings_reach_refinement_and_bad_values_are_refused() {
         let mut card = tiny(vec![]).card;
         assert_eq!(card.refine_params().stay, 0.0);
+        assert_eq!(card.refine_params().margin, 0.0);
         card.refine_stay = 1.0;
+        card.refine_margin = 0.1;
         card.validate().unwrap();
         assert_eq!(card.refine_params().stay, 1.0);
+        assert_eq!(card.refine_params().margin, 0.1);
         assert_eq!(card.refine_params().outliers, card.outliers);
         for bad in [-0.5, f64::NAN, f64::INFINITY] {
-            card.refine_stay = bad;
-            assert!(
-                card.validate()
-                    .unwrap_err()
-                    .to_string()
-                    .contains("refine_stay"),
-                "{bad}"
-            );
+            let mut stay = card.clone();
+            stay.refine_stay = bad;
+            let mut margin = card.clone();
+            margin.refine_margin = bad;
+            for (card, name) in [(stay, "refine_stay"), (margin, "refine_margin")] {
+                let message = card.validate().unwrap_err().to_string();
+                assert!(message.contains(name), "{bad}: {message}");
+            }
         }
     }
 

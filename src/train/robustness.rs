@@ -196,6 +196,9 @@ pub struct Report {
     /// The card's stay radius in refinement (σ; 0: nearest structure).
     #[serde(default)]
     pub refine_stay: f64,
+    /// The card's margin in refinement (σ; 0: any nearer structure).
+    #[serde(default)]
+    pub refine_margin: f64,
     pub settings: GridSettings,
     /// The factor columns, in table order.
     pub columns: Vec<String>,
@@ -343,6 +346,7 @@ pub fn run(
         k_max,
         refine: refine_of(&card),
         refine_stay: card.refine_stay,
+        refine_margin: card.refine_margin,
         settings: settings.clone(),
         columns,
         reference,
@@ -1247,6 +1251,7 @@ mod tests {
             k_max: 6,
             refine: false,
             refine_stay: 0.0,
+            refine_margin: 0.0,
             settings: GridSettings::default(),
             columns: vec!["scale".into(), "similarity".into()],
             reference: "a".into(),
