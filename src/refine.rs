@@ -16,7 +16,9 @@
 //!    0.1 σ: on short clips nearest-subspace reassignment moves tracks on differences far
 //!    inside the noise, and they drift to the wrong motion;
 //! 2. a point whose smallest residual exceeds the outlier threshold τ is labelled −1 (when
-//!    outliers are allowed);
+//!    outliers are allowed); while the rounds run a curve takes the points within
+//!    [`GROW_TAUS`] × τ, so that an arc fitted on part of its curve, whose extrapolation
+//!    leaves τ at its ends, grows along the curve (the last assignment uses τ);
 //! 3. every structure is fitted again on its points, keeping its model type (a line stays a
 //!    line while points move; a circle or an ellipse is refined from its current parameters,
 //!    its points having moved a little); a structure left with fewer than half the points it started
@@ -87,6 +89,9 @@ use crate::threads::Threads;
 
 /// Most reassignment rounds.
 pub const MAX_ITERATIONS: usize = 10;
+/// In the rounds a curve takes the points within this many outlier thresholds τ of it; the
+/// final assignment keeps τ.
+pub const GROW_TAUS: f64 = 2.0;
 /// Outlier threshold in units of the fit's noise level σ.
 pub const OUTLIER_SIGMAS: f64 = 3.0;
 /// A learned group whose own model explains less than this share of its points follows no
@@ -438,7 +443,13 @@ pub fn refine_on(
                 .or_else(|| geometry::fit_type(model.type_name(), &rows))
                 .unwrap_or_else(|| fit_on(idx))
         };
-        let reassign = |current: &[i64], groups: &[Option<Group>]| {
+        // The rounds let a curve take the points within GROW_TAUS × τ of it: an arc fitted on
+        // part of its curve extrapolates past τ at its ends, and would stop growing there.
+        let round_threshold = match family {
+            Family::Curves => GROW_TAUS * threshold,
+            _ => threshold,
+        };
+        let reassign = |current: &[i64], groups: &[Option<Group>], threshold: f64| {
             let radii = Radii {
                 threshold,
                 stay,
@@ -448,7 +459,7 @@ pub fn refine_on(
         };
         let mut moved = false;
         for _ in 0..MAX_ITERATIONS {
-            let next = reassign(&current, &groups);
+            let next = reassign(&current, &groups, round_threshold);
             if next == current {
                 break;
             }
@@ -522,7 +533,7 @@ pub fn refine_on(
             );
         }
         // Points of dropped groups that the last round did not move.
-        let current = reassign(&current, &groups);
+        let current = reassign(&current, &groups, threshold);
         answer(points, current, groups, sigma)
     })
 }
