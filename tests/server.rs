@@ -185,6 +185,33 @@ fn tracks_seen_in_some_frames_are_placed_on_the_motions() {
     let t: Vec<usize> = placed.iter().map(|&i| truth[i]).collect();
     let p: Vec<usize> = placed.iter().map(|&i| all[i]).collect();
     assert!(error_rate(&t, &p) < 0.05, "{}", error_rate(&t, &p));
+    let drift = |v: &Value| {
+        v["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|w| {
+                w.as_str()
+                    .unwrap()
+                    .contains("partly seen tracks placed on structure")
+            })
+            .count()
+    };
+    assert_eq!(drift(&v), 0, "{}", v["warnings"]);
+    // The same tracks, where no track of one motion is seen in the last frame: that motion's
+    // tracks are placed on the others, far from them, and a warning says so.
+    let hidden = truth[complete[0]];
+    let mut masked = visible.clone();
+    for &i in complete.iter().filter(|&&i| truth[i] == hidden) {
+        masked[i][frames - 1] = json!(0);
+    }
+    let r = server.post_json(
+        "/v1/fit",
+        &fit_body(&file, json!({"visible": masked, "k": k})),
+    );
+    assert_eq!(r.status, 200, "{}", r.text());
+    let v = r.json();
+    assert!(drift(&v) > 0, "{}", v["warnings"]);
     // A sequence with a track seen in no frame: that track is -1, and the warning counts it.
     let file = dataset("kt3dmoseg/Seq059_Clip01.json");
     let visible = file["visible"].clone();
