@@ -12,13 +12,16 @@
 //!    smallest by at most `margin` × σ ([`RefineParams::margin`], the card's `refine_margin`):
 //!    within the noise the geometry cannot tell the structures apart, and the learned label
 //!    carries what it saw (a structure the hypotheses stage swapped in keeps, in the first
-//!    round, the learned points that fit it so closely). Motion subspaces take a margin of
-//!    0.1 σ: on short clips nearest-subspace reassignment moves tracks on differences far
-//!    inside the noise, and they drift to the wrong motion;
+//!    round, the learned points that fit it so closely). The track models' cards set a margin
+//!    of 0.1 σ: on short clips nearest-subspace reassignment moves tracks on differences far
+//!    inside the noise, and they drift to the wrong motion. Neither radius keeps a point past
+//!    the outlier threshold;
 //! 2. a point whose smallest residual exceeds the outlier threshold τ is labelled −1 (when
 //!    outliers are allowed); while the rounds run a curve takes the points within
 //!    [`GROW_TAUS`] × τ, so that an arc fitted on part of its curve, whose extrapolation
-//!    leaves τ at its ends, grows along the curve (the last assignment uses τ);
+//!    leaves τ at its ends, grows along the curve. The type chosen again, the merges and the
+//!    answer's models are fitted on those sets; the labels come from the last assignment, at
+//!    τ, so a structure's `inliers` and `rms` count only the points within τ;
 //! 3. every structure is fitted again on its points, keeping its model type (a line stays a
 //!    line while points move; a circle or an ellipse is refined from its current parameters,
 //!    its points having moved a little); a structure left with fewer than half the points it started
@@ -117,7 +120,7 @@ pub struct RefineParams {
     /// where another structure is nearer; 0: every point goes to the nearest.
     pub stay: f64,
     /// A point leaves its structure only for one whose residual is smaller by more than this
-    /// many σ; 0: for any nearer one.
+    /// many σ (and within the outlier threshold there); 0: for any nearer one.
     pub margin: f64,
 }
 
@@ -449,9 +452,9 @@ pub fn refine_on(
             Family::Curves => GROW_TAUS * threshold,
             _ => threshold,
         };
-        let reassign = |current: &[i64], groups: &[Option<Group>], threshold: f64| {
+        let reassign = |current: &[i64], groups: &[Option<Group>], outlier_radius: f64| {
             let radii = Radii {
-                threshold,
+                threshold: outlier_radius,
                 stay,
                 margin,
             };
@@ -606,10 +609,13 @@ fn assign(
         }
         let row = points.row(i);
         // The residual to the point's own live structure, where a radius may keep it there.
-        let own = live
-            .iter()
-            .find(|&&(j, _)| keeps && j as i64 == here)
-            .map(|(_, m)| m.residual(row));
+        let own = if keeps {
+            live.iter()
+                .find(|&&(j, _)| j as i64 == here)
+                .map(|(_, m)| m.residual(row))
+        } else {
+            None
+        };
         if own.is_some_and(|r| r <= radii.stay) {
             return here;
         }

@@ -28,7 +28,7 @@
 //! the points at the truncated quadratic cost C(S) = Σᵢ min(min_{h∈S} r_h(xᵢ)², τ²). Starting
 //! from the learned groups' models, the swap of one model of S for one hypothesis that lowers C
 //! the most is made, while it lowers C by more than [`MIN_GAIN`] × τ² (the cost of that many
-//! outliers), at most [`MAX_SWAPS`] times: the local search of k-medoids (PAM), with hypotheses
+//! outliers), at most [`MAX_SWAPS`] times per pass: the local search of k-medoids (PAM), with hypotheses
 //! as the candidate medoids. When the search changed the models, it proposes again from the
 //! points the chosen ones leave unexplained (their anchors alone) and searches again, up to
 //! [`REPROPOSALS`] times: the first proposals spread their unexplained anchors over what the
@@ -248,8 +248,9 @@ fn seen_rows(n: usize) -> Vec<usize> {
 /// Hypotheses of every type of `family`, each fitted on one neighbourhood and grown within
 /// `threshold` over the `rows` of `points`: the neighbourhoods of [`ANCHORS`] anchors among
 /// `rows` (when `spread_over_all`), then of [`UNEXPLAINED_ANCHORS`] among the `unexplained`
-/// rows, taken among those alone. A neighbourhood that a hypothesis of the same type already explains gives none (it
-/// would give that one again). The hypotheses are the same on any number of threads.
+/// rows, taken among those alone. A neighbourhood that a hypothesis of the same type already
+/// explains gives none (it would give that one again). The hypotheses are the same on any
+/// number of threads.
 fn propose(
     points: &PointSet,
     rows: &[usize],

@@ -155,7 +155,8 @@ pub struct ModelCard {
     #[serde(default, skip_serializing_if = "is_zero")]
     pub refine_stay: f64,
     /// Refinement moves a point to another structure only where that one fits it better by
-    /// more than this many σ ([`RefineParams::margin`]); 0: wherever another is nearer.
+    /// more than this many σ ([`RefineParams::margin`]; a point past the outlier threshold is
+    /// not kept); 0: wherever another is nearer.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub refine_margin: f64,
     /// The models a structure may follow; default by kind: curves for points2d, fundamental
