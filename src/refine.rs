@@ -19,9 +19,10 @@
 //! 2. a point whose smallest residual exceeds the outlier threshold τ is labelled −1 (when
 //!    outliers are allowed); while the rounds run a curve takes the points within
 //!    [`GROW_TAUS`] × τ, so that an arc fitted on part of its curve, whose extrapolation
-//!    leaves τ at its ends, grows along the curve. The type chosen again, the merges and the
-//!    answer's models are fitted on those sets; the labels come from the last assignment, at
-//!    τ, so a structure's `inliers` and `rms` count only the points within τ;
+//!    leaves τ at its ends, grows along the curve. Once the rounds settle, every point is
+//!    assigned at τ before the types are chosen again and pairs merge, so that the answer's
+//!    models are fitted on the points within τ (fitted on the 2 τ sets, they took in more
+//!    outliers: `lce` grid at 50 % outliers, known K 35.23 -> 35.12 %);
 //! 3. every structure is fitted again on its points, keeping its model type (a line stays a
 //!    line while points move; a circle or an ellipse is refined from its current parameters,
 //!    its points having moved a little); a structure left with fewer than half the points it started
@@ -494,6 +495,10 @@ pub fn refine_on(
                     g.type_chosen = family.candidates().len() == 1;
                 }
             }
+        }
+        // Types, merges and the answer's models are settled on the points within τ.
+        if moved && round_threshold != threshold {
+            current = reassign(&current, &groups, threshold);
         }
         // The type of each structure, chosen again on its settled points (unmoved groups keep
         // their first fit, which was chosen on the same points). A group refitted on exactly
