@@ -1,5 +1,6 @@
 """What the scripts that fit against a running server share (imported, not run): one POST to
-/v1/fit, and the error of an answer under the best one-to-one matching of groups."""
+/v1/fit, and the error of an answer under the best one-to-one matching of groups (with -1 as
+the outliers' label, or not)."""
 import collections, itertools, json, urllib.request
 
 
@@ -17,3 +18,13 @@ def error(truth, labels):
     best = max(sum(count[(a, b)] for a, b in zip(ks, perm) if b is not None)
                for perm in itertools.permutations(ts + [None] * max(0, len(ks) - len(ts)), len(ks)))
     return 1 - best / len(truth)
+
+
+def error_minus_one(truth, labels):
+    """Share of points outside the best one-to-one matching of the answer's structures to the
+    true structures, outliers (truth 0) matched to -1: a structure's point answered -1 and an
+    outlier answered as a structure's are both outside it."""
+    kept = [(t, l) for t, l in zip(truth, labels) if l >= 0 and t > 0]
+    matched = (1 - error([t for t, _ in kept], [l for _, l in kept])) * len(kept) if kept else 0
+    matched += sum(1 for t, l in zip(truth, labels) if t == 0 and l == -1)
+    return 1 - matched / len(truth)

@@ -20,16 +20,6 @@ ap.add_argument("--list", action="store_true")
 args = ap.parse_args()
 
 
-def error(truth, labels):
-    """Share of points outside the best one-to-one matching of the answer's structures to the
-    true groups; points answered -1 are outside it."""
-    kept = [(t, l) for t, l in zip(truth, labels) if l >= 0]
-    if not kept:
-        return 1.0
-    matched = (1 - fitting.error([t for t, _ in kept], [l for _, l in kept])) * len(kept)
-    return 1 - matched / len(truth)
-
-
 def one(seed):
     rng = random.Random(seed)
     rows, truth = [], []
@@ -58,7 +48,7 @@ for seed in range(args.seeds):
         body["k"] = 3
     r = fitting.post(args.port, body)
     # Each point answered -1 in a group of its own: no structure to match, so it counts as wrong.
-    e = error(truth, r["labels"])
+    e = fitting.error_minus_one(truth, r["labels"])
     small = collections.Counter(l for l, t in zip(r["labels"], truth) if t == 3)
     label, count = small.most_common(1)[0]
     held = sum(1 for l in r["labels"] if l == label)

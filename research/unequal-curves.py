@@ -24,16 +24,6 @@ ap.add_argument("--list", action="store_true")
 args = ap.parse_args()
 
 
-def error(truth, labels):
-    """Share of points outside the best one-to-one matching of the answer's structures to the
-    true curves, outliers (truth 0) matched to -1: a curve's point answered -1 and an outlier
-    answered as a structure's are both outside it."""
-    kept = [(t, l) for t, l in zip(truth, labels) if l >= 0 and t > 0]
-    matched = (1 - fitting.error([t for t, _ in kept], [l for _, l in kept])) * len(kept) if kept else 0
-    matched += sum(1 for t, l in zip(truth, labels) if t == 0 and l == -1)
-    return 1 - matched / len(truth)
-
-
 def one(seed):
     rng = random.Random(seed)
     m = rng.randint(2, 4)
@@ -73,7 +63,7 @@ for seed in range(args.first_seed, args.first_seed + args.seeds):
     if args.k:
         body["k"] = len(kinds)
     r = fitting.post(args.port, body)
-    e = error(truth, r["labels"])
+    e = fitting.error_minus_one(truth, r["labels"])
     smallest = 1 + min(range(len(kinds)), key=lambda i: kinds[i][1])
     n_small = kinds[smallest - 1][1]
     small = collections.Counter(l for l, t in zip(r["labels"], truth) if t == smallest)

@@ -204,32 +204,36 @@ pub const SPLIT_MORE_OUTLIERS: f64 = 0.05;
 pub const GIVEN_MORE_OUTLIERS: f64 = 0.2;
 
 /// Whether `chosen` (refined from the clustering K chosen would give) replaces `given` (refined
-/// from the caller's k clusters): exactly `k` structures, each measuring a noise, a noise
-/// ([`Refined::noise`]) finite and at most 1 / [`SPLIT_NOISE_FACTOR`] of `given`'s, and at most
-/// [`GIVEN_MORE_OUTLIERS`] of the `n` points more as outliers. Where the k clustering mixed the
-/// structures, its groups set a wide noise level under which refinement cannot part them.
+/// from the caller's k clusters): exactly `k` structures, each measuring a noise, and
+/// [`far_quieter`] with at most [`GIVEN_MORE_OUTLIERS`] of the `n` points more as outliers.
+/// Where the k clustering mixed the structures, its groups set a wide noise level under which
+/// refinement cannot part them.
 pub fn replaces_given(given: &Refined, chosen: &Refined, k: usize, n: usize) -> bool {
     chosen.structures.len() == k
         && chosen.measured().count() == k
-        && chosen.noise().is_finite()
-        && chosen.noise() * SPLIT_NOISE_FACTOR <= given.noise()
-        && chosen.outliers() as f64 <= given.outliers() as f64 + GIVEN_MORE_OUTLIERS * n as f64
+        && far_quieter(given, chosen, GIVEN_MORE_OUTLIERS * n as f64)
 }
 
 /// Whether `wider` (refined from one more cluster) splits a structure that `answer` pooled: it
-/// has at least as many structures that measure a noise, its noise ([`Refined::noise`]) is
-/// finite and at most 1 / [`SPLIT_NOISE_FACTOR`] of `answer`'s, and it flags at most
-/// [`SPLIT_MORE_OUTLIERS`] of the `n` points more as outliers. Two planes (or curves) held by one structure give it a
-/// noise level near their separation; apart, each has the sensor's. As many structures count
-/// too: two structures that each held parts of two crossing curves, against the two curves
-/// apart (the extra group taken by a third structure the rounds then dropped or merged). A
-/// structure split in two halves keeps its noise, and an outlier group split in two is
-/// dissolved again, so neither passes.
+/// has at least as many structures that measure a noise, and is [`far_quieter`] with at most
+/// [`SPLIT_MORE_OUTLIERS`] of the `n` points more as outliers. Two planes (or curves) held by
+/// one structure give it a noise level near their separation; apart, each has the sensor's. As
+/// many structures count too: two structures that each held parts of two crossing curves,
+/// against the two curves apart (the extra group taken by a third structure the rounds then
+/// dropped or merged). A structure split in two halves keeps its noise, and an outlier group
+/// split in two is dissolved again, so neither passes.
 pub fn splits_pooled(answer: &Refined, wider: &Refined, n: usize) -> bool {
     wider.measured().count() >= answer.measured().count()
-        && wider.noise().is_finite()
-        && wider.noise() * SPLIT_NOISE_FACTOR <= answer.noise()
-        && wider.outliers() as f64 <= answer.outliers() as f64 + SPLIT_MORE_OUTLIERS * n as f64
+        && far_quieter(answer, wider, SPLIT_MORE_OUTLIERS * n as f64)
+}
+
+/// Whether `other`'s noise ([`Refined::noise`]) is finite and at most 1 /
+/// [`SPLIT_NOISE_FACTOR`] of `base`'s, while it flags at most `more_outliers` points more as
+/// outliers than `base`.
+fn far_quieter(base: &Refined, other: &Refined, more_outliers: f64) -> bool {
+    other.noise().is_finite()
+        && other.noise() * SPLIT_NOISE_FACTOR <= base.noise()
+        && other.outliers() as f64 <= base.outliers() as f64 + more_outliers
 }
 
 /// The family of models a model card's structures follow.

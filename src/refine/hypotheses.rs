@@ -28,12 +28,12 @@
 //! the points at the truncated quadratic cost C(S) = Σᵢ min(min_{h∈S} r_h(xᵢ)², τ²). Starting
 //! from the learned groups' models, the swap of one model of S for one hypothesis that lowers C
 //! the most is made, while it lowers C by more than [`MIN_GAIN`] × τ² (the cost of that many
-//! outliers), at most [`MAX_SWAPS`] times per pass: the local search of k-medoids (PAM), with hypotheses
-//! as the candidate medoids. When the search changed the models, it proposes again from the
-//! points the chosen ones leave unexplained (their anchors alone) and searches again, up to
-//! [`REPROPOSALS`] times: the first proposals spread their unexplained anchors over what the
-//! learned models missed, mostly the largest missed structure; once it is added, the smaller
-//! ones are what is left. A hypothesis that is swapped in is fitted robustly
+//! outliers), at most [`MAX_SWAPS`] times per pass: the local search of k-medoids (PAM), with
+//! hypotheses as the candidate medoids. When the search changed the models, it proposes again
+//! from the points the chosen ones leave unexplained (their anchors alone) and searches again,
+//! up to [`REPROPOSALS`] times: the first proposals spread their unexplained anchors over what
+//! the learned models missed, mostly the largest missed structure; once it is added, the
+//! smaller ones are what is left. A hypothesis that is swapped in is fitted robustly
 //! ([`geometry::fit_type`]) on the points it explains best, and takes the place of the structure
 //! it replaced.
 //!
@@ -115,11 +115,15 @@ pub fn swaps(
     let mut pool: Vec<Vec<f64>> = threads.map_n(slots.len(), |h| {
         cost_row(current[slots[h]].expect("live slot"))
     });
-    // The seen rows no current model explains.
-    let unexplained: Vec<usize> = (0..rows.len())
-        .filter(|&k| pool.iter().all(|costs| costs[k] >= tau2))
-        .map(|k| rows[k])
-        .collect();
+    // The seen rows no chosen model explains.
+    let unexplained_by = |pool: &[Vec<f64>], chosen: &[usize]| -> Vec<usize> {
+        (0..rows.len())
+            .filter(|&k| chosen.iter().all(|&h| pool[h][k] >= tau2))
+            .map(|k| rows[k])
+            .collect()
+    };
+    let mut chosen: Vec<usize> = (0..slots.len()).collect();
+    let unexplained = unexplained_by(&pool, &chosen);
     let mut hypotheses = propose(
         points,
         &rows,
@@ -136,7 +140,6 @@ pub fn swaps(
         label_cost: label_cost(family, rows.len()) * tau2,
         tau2,
     };
-    let mut chosen: Vec<usize> = (0..slots.len()).collect();
     for pass in 0..=REPROPOSALS {
         let before = chosen.clone();
         search.run(&pool, &mut chosen);
@@ -144,10 +147,7 @@ pub fn swaps(
             break;
         }
         // What the chosen models leave unexplained, proposed from again.
-        let unexplained: Vec<usize> = (0..rows.len())
-            .filter(|&k| chosen.iter().all(|&h| pool[h][k] >= tau2))
-            .map(|k| rows[k])
-            .collect();
+        let unexplained = unexplained_by(&pool, &chosen);
         let more = propose(
             points,
             &rows,
