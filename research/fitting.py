@@ -1,6 +1,6 @@
 """What the scripts that fit against a running server share (imported, not run): one POST to
-/v1/fit, and the error of an answer under the best one-to-one matching of groups (with -1 as
-the outliers' label, or not)."""
+/v1/fit, the error of an answer under the best one-to-one matching of groups (with -1 as the
+outliers' label, or not), and whether one true group was found."""
 import collections, itertools, json, urllib.request
 
 
@@ -28,3 +28,12 @@ def error_minus_one(truth, labels):
     matched = (1 - error([t for t, _ in kept], [l for _, l in kept])) * len(kept) if kept else 0
     matched += sum(1 for t, l in zip(truth, labels) if t == 0 and l == -1)
     return 1 - matched / len(truth)
+
+
+def found(truth, labels, group):
+    """Whether the answer holds true group `group` in a structure of its own: 75 % of its points
+    in one structure (not -1) of at most 1.25 times its count."""
+    n = sum(1 for t in truth if t == group)
+    label, count = collections.Counter(l for l, t in zip(labels, truth) if t == group).most_common(1)[0]
+    held = sum(1 for l in labels if l == label)
+    return label != -1 and count >= 0.75 * n and held <= 1.25 * n

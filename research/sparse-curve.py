@@ -49,14 +49,12 @@ for seed in range(args.seeds):
     r = fitting.post(args.port, body)
     # Each point answered -1 in a group of its own: no structure to match, so it counts as wrong.
     e = fitting.error_minus_one(truth, r["labels"])
-    small = collections.Counter(l for l, t in zip(r["labels"], truth) if t == 3)
-    label, count = small.most_common(1)[0]
-    held = sum(1 for l in r["labels"] if l == label)
     bad = r["k"] != 3 or e > 0.05
     errors.append(e)
     wrong += bad
-    found += label != -1 and count >= 15 and held <= 25
+    found += fitting.found(truth, r["labels"], 3)
     if args.list:
+        small = collections.Counter(l for l, t in zip(r["labels"], truth) if t == 3)
         print(seed, "k", r["k"], "error %.2f" % (100 * e),
               [(s["type"], s["inliers"]) for s in r["structures"]], "20-point circle:", dict(small),
               "WRONG" if bad else "")

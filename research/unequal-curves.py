@@ -9,7 +9,7 @@ error) and how often the smallest curve is found (75 % of its points in one stru
 at most 1.25 times its count). Needs a running server.
 
   python3 research/unequal-curves.py PORT [--k] [--seeds N] [--first-seed S] [--outliers F] [--list]"""
-import argparse, collections, math, random
+import argparse, math, random
 
 import fitting
 
@@ -65,14 +65,10 @@ for seed in range(args.first_seed, args.first_seed + args.seeds):
     r = fitting.post(args.port, body)
     e = fitting.error_minus_one(truth, r["labels"])
     smallest = 1 + min(range(len(kinds)), key=lambda i: kinds[i][1])
-    n_small = kinds[smallest - 1][1]
-    small = collections.Counter(l for l, t in zip(r["labels"], truth) if t == smallest)
-    label, count = small.most_common(1)[0]
-    held = sum(1 for l in r["labels"] if l == label)
     bad = r["k"] != len(kinds) or e > 0.05
     errors.append(e)
     wrong += bad
-    found += label != -1 and count >= 0.75 * n_small and held <= 1.25 * n_small
+    found += fitting.found(truth, r["labels"], smallest)
     if args.list:
         print(seed, kinds, "k", r["k"], "error %.2f" % (100 * e),
               [(s["type"], s["inliers"]) for s in r["structures"]], "WRONG" if bad else "")
