@@ -417,12 +417,13 @@ pub fn refine(
 }
 
 /// Stage 5 with K chosen automatically: the clustering refined, and the k + 1 clustering
-/// refined too where the choice considered k + 1; the wider answer is kept where it splits a
-/// structure that pooled two ([`refine::splits_pooled`]). SOD stops at k when splitting a group
-/// lowers the embeddings' residual little, and refinement cannot split a structure that holds
-/// two planes or curves: their pooled fit sets a noise level under which both fit. A K the
-/// caller gave, and motion subspaces, are refined as they are. -> the clustering the answer
-/// came from (with both residual curves when it is the wider one), and the answer.
+/// refined too where the choice considered k + 1 (the two side by side on the model's threads);
+/// the wider answer is kept where it splits a structure that pooled two
+/// ([`refine::splits_pooled`]). SOD stops at k when splitting a group lowers the embeddings'
+/// residual little, and refinement cannot split a structure that holds two planes or curves:
+/// their pooled fit sets a noise level under which both fit. A K the caller gave, and motion
+/// subspaces, are refined as they are. -> the clustering the answer came from (with both
+/// residual curves when it is the wider one), and the answer.
 pub fn refine_chosen(
     model: &LoadedModel,
     points: &PointSet,
@@ -431,7 +432,6 @@ pub fn refine_chosen(
     clustering: &Clustering,
     r: &RefineParams,
 ) -> Result<(Clustering, Refined), FitError> {
-    let refined = refine(model, points, clustering, r);
     let k = clustering.k;
     let considered = clustering.scores.iter().map(|s| s.0).max().unwrap_or(k);
     let read = embedding.values.len() / embedding.width.max(1);
@@ -439,9 +439,13 @@ pub fn refine_chosen(
         || model.card.family() == geometry::Family::Subspace
         || k + 1 > considered.min(read)
     {
-        return Ok((clustering.clone(), refined));
+        return Ok((clustering.clone(), refine(model, points, clustering, r)));
     }
-    let (wider, again) = refine_one_more(model, points, embedding, params, clustering, r)?;
+    let wider = one_more_group(model, embedding, params, clustering)?;
+    let (refined, again) = model.pool().join(
+        || refine(model, points, clustering, r),
+        || refine(model, points, &wider, r),
+    );
     Ok(if refine::splits_pooled(&refined, &again, points.len()) {
         (both_ks(clustering, wider), again)
     } else {
@@ -449,25 +453,22 @@ pub fn refine_chosen(
     })
 }
 
-/// The clustering of `embedding` into one group more than `clustering`, refined: where the k
-/// answer pooled two structures (a chosen K, [`refine_chosen`]) or gave the outliers no group of
-/// their own (a k given). A chosen K's selection and scores are kept, so that the wider
-/// clustering is refined as a chosen K too (structures may merge, or be added).
-fn refine_one_more(
+/// The clustering of `embedding` into one group more than `clustering`: where the k answer
+/// pooled two structures (a chosen K, [`refine_chosen`]) or gave the outliers no group of their
+/// own (a k given). A chosen K's selection and scores are kept, so that the wider clustering is
+/// refined as a chosen K too (structures may merge, or be added).
+fn one_more_group(
     model: &LoadedModel,
-    points: &PointSet,
     embedding: &Embedding,
     params: &ClusterParams,
     clustering: &Clustering,
-    r: &RefineParams,
-) -> Result<(Clustering, Refined), FitError> {
+) -> Result<Clustering, FitError> {
     let mut wider = cluster(model, embedding, &params.with_fixed_k(clustering.k + 1)?)?;
     if !matches!(clustering.selection, Selection::Fixed(_)) {
         wider.selection = clustering.selection;
         wider.scores = clustering.scores.clone();
     }
-    let again = refine(model, points, &wider, r);
-    Ok((wider, again))
+    Ok(wider)
 }
 
 /// The whole fit of one point set, stage by stage.
@@ -567,8 +568,52 @@ fn fit_counting(
     let mut replaced = None;
     let (labels, structures, k) = match &refine_params {
         Some(r) => {
-            let mut refined = match given {
-                Some(_) => refine(model, points, &clustering, r),
+            let refined = match given {
+                Some(k) => {
+                    // The k clustering, the k + 1 one and the one K chosen would give, refined
+                    // side by side; the decisions below take them in that order.
+                    let wider = (r.outliers && k < read)
+                        .then(|| one_more_group(model, &embedding, params, &clustering))
+                        .transpose()?;
+                    let auto = params.with_chosen_k(model.card.selection, params.k_max().max(k));
+                    let chosen = cluster(model, &embedding, &auto)?;
+                    let pool = model.pool();
+                    let ((mut refined, again), other) = pool.join(
+                        || {
+                            pool.join(
+                                || refine(model, points, &clustering, r),
+                                || wider.as_ref().map(|w| refine(model, points, w, r)),
+                            )
+                        },
+                        || refine(model, points, &chosen, r),
+                    );
+                    // Refinement dissolves the outlier group into -1 labels, so the k + 1
+                    // clustering is refined too, and its answer is kept when it has no more
+                    // than k structures and no fewer than the k clustering's. (Refining it only
+                    // where the k answer shows outliers saves the time on clean sets but misses
+                    // pairs whose outliers the k answer absorbed: 6.99 against 4.20 % on the
+                    // AdelaideRMF homography pairs.) Motion subspaces are not trained with
+                    // outliers and drop a structure that shrinks.
+                    if let (Some(wider), Some(again)) = (wider, again) {
+                        let found = again.structures.len();
+                        if found <= k && found >= refined.structures.len() {
+                            clustering = both_ks(&clustering, wider);
+                            refined = again;
+                        }
+                    }
+                    // Where the k clustering mixed structures, its groups set a noise level
+                    // under which refinement cannot part them: the clustering K chosen would
+                    // give, refined as a chosen K (structures may be added, up to k_max, or
+                    // merge), may reach the k structures at a far lower noise
+                    // ([`refine::replaces_given`]).
+                    if refine::replaces_given(&refined, &other, k, points.len()) {
+                        replaced = Some((chosen.k, other.noise(), refined.noise()));
+                        clustering = chosen;
+                        other
+                    } else {
+                        refined
+                    }
+                }
                 None => {
                     let (from, refined) =
                         refine_chosen(model, points, &embedding, params, &clustering, r)?;
@@ -576,35 +621,6 @@ fn fit_counting(
                     refined
                 }
             };
-            // Refinement dissolves the outlier group into -1 labels, so the k + 1 clustering is
-            // refined too, and its answer is kept when it has no more than k structures and no
-            // fewer than the k clustering's. (Refining it only where the k answer shows outliers
-            // saves the time on clean sets but misses pairs whose outliers the k answer
-            // absorbed: 6.99 against 4.20 % on the AdelaideRMF homography pairs.) Motion
-            // subspaces are not trained with outliers and drop a structure that shrinks.
-            if let Some(k) = given.filter(|&k| r.outliers && k < read) {
-                let (wider, again) =
-                    refine_one_more(model, points, &embedding, params, &clustering, r)?;
-                let found = again.structures.len();
-                if found <= k && found >= refined.structures.len() {
-                    clustering = both_ks(&clustering, wider);
-                    refined = again;
-                }
-            }
-            // Where the k clustering mixed structures, its groups set a noise level under which
-            // refinement cannot part them: the clustering K chosen would give, refined as a
-            // chosen K (structures may be added, up to k_max, or merge), may reach the k
-            // structures at a far lower noise ([`refine::replaces_given`]).
-            if let Some(k) = given {
-                let auto = params.with_chosen_k(model.card.selection, params.k_max().max(k));
-                let chosen = cluster(model, &embedding, &auto)?;
-                let other = refine(model, points, &chosen, r);
-                if refine::replaces_given(&refined, &other, k, points.len()) {
-                    replaced = Some((chosen.k, other.noise(), refined.noise()));
-                    clustering = chosen;
-                    refined = other;
-                }
-            }
             let k = refined.structures.len();
             (refined.labels, refined.structures, k)
         }

@@ -38,6 +38,18 @@ impl Threads {
         }
     }
 
+    /// `a` and `b` side by side on the pool, or one after the other on the calling thread.
+    pub fn join<A: Send, B: Send>(
+        &self,
+        a: impl FnOnce() -> A + Send,
+        b: impl FnOnce() -> B + Send,
+    ) -> (A, B) {
+        match &self.0 {
+            None => (a(), b()),
+            Some(pool) => pool.install(|| rayon::join(a, b)),
+        }
+    }
+
     /// `f` over every item, results in item order. Call inside [`Threads::install`].
     pub fn map<I: Send, T: Send>(
         &self,
@@ -94,6 +106,27 @@ mod tests {
             });
             assert_eq!(doubled, (1..=40).map(|i| i * 2).collect::<Vec<_>>());
             assert_eq!(items, (1..=40).collect::<Vec<_>>());
+        }
+    }
+
+    #[test]
+    fn a_join_runs_both_sides_on_the_pool_and_nests() {
+        for count in [0, 2] {
+            let threads = Threads::new(count).unwrap();
+            let on_pool = |name: Option<&str>| name.is_some_and(|n| n.starts_with("multifit-fit-"));
+            let ((a, b), c) = threads.join(
+                || {
+                    threads.join(
+                        || threads.install(|| threads.map_n(10, |i| i + 1)),
+                        || std::thread::current().name().map(str::to_owned),
+                    )
+                },
+                || (1..=4).product::<usize>(),
+            );
+            assert_eq!(a, (1..=10).collect::<Vec<_>>());
+            assert_eq!(c, 24);
+            // With a pool the work runs on the fit's own threads, never the caller's.
+            assert_eq!(on_pool(b.as_deref()), count > 1, "{b:?}");
         }
     }
 }
