@@ -41,6 +41,11 @@
 //!   [`OBJ_DEPTH`] = 4 to 20. Objects are drawn through each other and the background: no
 //!   occlusion is modelled.
 //!
+//! - a flat object (`--planar`: each object is flat with the sample's probability, uniform in
+//!   that range, default 0): its points uniform on the square of the same half-size in its body
+//!   frame's x-y plane (z = 0), turned and moved as any object: a planar patch such as a
+//!   checkerboard, whose tracks under an affine camera span a subspace of rank 3, not 4.
+//!
 //! Each motion has `n` tracks, `n` uniform in the `--points` range (default 30 to 200).
 //!
 //! **Noise.** Every inlier position gets isotropic Gaussian noise of sigma px per coordinate,
@@ -157,6 +162,9 @@ pub struct MotionParams {
     pub height: [f64; 2],
     /// Fraction of the tracks seen in only part of the clip (`--dropout`, in `[0, 1)`).
     pub dropout: [f64; 2],
+    /// Probability that an object is flat (`--planar`, in `[0, 1]`), drawn per sample.
+    #[serde(default)]
+    pub planar: [f64; 2],
 }
 
 impl Default for MotionParams {
@@ -172,6 +180,7 @@ impl Default for MotionParams {
             width: [640.0, 1920.0],
             height: [360.0, 1080.0],
             dropout: [0.0, 0.0],
+            planar: [0.0, 0.0],
         }
     }
 }
@@ -229,6 +238,12 @@ impl MotionParams {
             self.dropout,
             (0.0, 1.0, true),
             "the fraction of partly seen tracks",
+        )?;
+        check_range(
+            "--planar",
+            self.planar,
+            (0.0, 1.0, false),
+            "the probability that an object is flat",
         )?;
         let scale = self.motion_scale;
         if !(scale[0] > 0.0 && scale[1] > 0.0) {
@@ -371,6 +386,8 @@ pub struct MotionTruth {
     pub cameras: Vec<Pose>,
     /// Per motion, per frame, the body-to-world pose (the background's is the identity).
     pub motions: Vec<Vec<Pose>>,
+    /// Per motion, whether it is a flat object (`--planar`; the background never is).
+    pub flat: Vec<bool>,
     /// Per row of the sample, its motion index (0 = background) and body-frame point; `None`
     /// for an outlier.
     pub body: Vec<Option<(usize, [f64; 3])>>,
@@ -424,6 +441,8 @@ struct Setup {
     noise: f64,
     outlier_fraction: f64,
     motion_scale: f64,
+    /// Probability that an object is flat.
+    planar: f64,
 }
 
 /// A seeded motion generator: the same seed and params give the same samples.
@@ -464,6 +483,12 @@ impl MotionGenerator {
             noise: uniform(rng, p.noise),
             outlier_fraction: uniform(rng, p.outliers),
             motion_scale: log_uniform(rng, p.motion_scale),
+            // Drawn only when asked, so that every other setting gives the samples it gave.
+            planar: if p.planar[1] > 0.0 {
+                uniform(rng, p.planar)
+            } else {
+                0.0
+            },
         };
         let mut halvings = 0;
         let (tracks, mut truth) = loop {
@@ -507,6 +532,7 @@ impl MotionGenerator {
         };
         let mut motions = vec![vec![Pose::IDENTITY; setup.frames]];
         let mut half_sizes = vec![0.0];
+        let mut flat = vec![false];
         for _ in 1..setup.counts.len() {
             let depth = uniform(rng, OBJ_DEPTH);
             let (u, v) = (
@@ -527,6 +553,7 @@ impl MotionGenerator {
             };
             motions.push(taus.iter().map(|&t| object.at(t)).collect());
             half_sizes.push(r);
+            flat.push(setup.planar > 0.0 && rng.random_bool(setup.planar));
         }
         let noise = Normal::new(0.0, setup.noise).expect("validated sigma");
         let mut tracks = Vec::new();
@@ -543,7 +570,11 @@ impl MotionGenerator {
                     back(u, v, uniform(rng, BG_DEPTH))
                 } else {
                     let r = half_sizes[m];
-                    [0; 3].map(|_| rng.random_range(-r..=r))
+                    let mut x: V3 = [0; 3].map(|_| rng.random_range(-r..=r));
+                    if flat[m] {
+                        x[2] = 0.0;
+                    }
+                    x
                 };
                 let mut row = Vec::with_capacity(2 * setup.frames);
                 for (camera, pose) in cameras.iter().zip(&motions[m]) {
@@ -570,6 +601,7 @@ impl MotionGenerator {
             noise: setup.noise,
             cameras,
             motions,
+            flat,
             body: vec![],
         };
         Some((tracks, truth))
@@ -701,6 +733,16 @@ impl MotionSample {
                 self.outliers
             );
         }
+        let flat: Vec<String> = (0..t.flat.len())
+            .filter(|&m| t.flat[m])
+            .map(|m| (m + 1).to_string())
+            .collect();
+        if !flat.is_empty() {
+            source += &format!(
+                "; flat objects (planar patches): labels {}",
+                flat.join(", ")
+            );
+        }
         if let Some(v) = &self.visible {
             let partly = v.iter().filter(|row| row.contains(&0)).count();
             source += &format!("; {partly} tracks seen in only part of the clip (visible)");
@@ -792,6 +834,9 @@ impl std::fmt::Display for MotionSpec {
         if p.dropout != [0.0, 0.0] {
             write!(f, ",dropout={}", range_text(p.dropout))?;
         }
+        if p.planar != [0.0, 0.0] {
+            write!(f, ",planar={}", range_text(p.planar))?;
+        }
         Ok(())
     }
 }
@@ -823,11 +868,12 @@ impl std::str::FromStr for MotionSpec {
                 "width" => p.width = setting.pair()?,
                 "height" => p.height = setting.pair()?,
                 "dropout" => p.dropout = setting.pair()?,
+                "planar" => p.planar = setting.pair()?,
                 _ => {
                     return Err(SpecError::UnknownSetting {
                         generator: "motion",
                         key: setting.key.to_string(),
-                        known: "count, seed, frames, motions, points, noise, outliers, motion-scale, focal, width, height, dropout",
+                        known: "count, seed, frames, motions, points, noise, outliers, motion-scale, focal, width, height, dropout, planar",
                     });
                 }
             }
@@ -1279,6 +1325,71 @@ mod tests {
         }
         let bad = "dropout=1".parse::<MotionSpec>().unwrap_err().to_string();
         assert!(bad.starts_with("dropout=1"), "{bad}");
+    }
+
+    #[test]
+    fn flat_objects_lie_on_a_plane_and_leave_other_settings_as_they_were() {
+        let base = "count=6,seed=21,frames=8,motions=3-4,points=20-30,noise=0";
+        let plain: MotionSpec = base.parse().unwrap();
+        let none: MotionSpec = format!("{base},planar=0").parse().unwrap();
+        let all: MotionSpec = format!("{base},planar=1").parse().unwrap();
+        assert!(!plain.to_string().contains("planar"));
+        assert!(all.to_string().ends_with(",planar=1"));
+        let text = all.to_string();
+        assert_eq!(text["motion:".len()..].parse::<MotionSpec>().unwrap(), all);
+        // Asking for none draws nothing more: the same samples.
+        let a: Vec<SequenceFile> = plain.files().unwrap().collect();
+        let b: Vec<SequenceFile> = none.files().unwrap().collect();
+        assert_eq!(
+            a.iter().map(|f| &f.points).collect::<Vec<_>>(),
+            b.iter().map(|f| &f.points).collect::<Vec<_>>()
+        );
+        let mut flat_rows = 0;
+        let mut generator = MotionGenerator::new(21, all.params).unwrap();
+        for i in 0..6 {
+            let m = generator.sample(&format!("s{i}"));
+            assert!(!m.truth.flat[0] && m.truth.flat[1..].iter().all(|&f| f));
+            for (motion, body) in m.truth.body.iter().flatten() {
+                if *motion > 0 {
+                    assert_eq!(body[2], 0.0);
+                    flat_rows += 1;
+                }
+            }
+            assert!(m.to_file(21).source.unwrap().contains("flat objects"));
+        }
+        assert!(flat_rows > 100);
+        // Cube objects (the default) are not flat. Under an affine camera a flat object's
+        // centred tracks span 2 dimensions and a solid one's 3; under small perspective motion,
+        // nearly: the flat objects' energy beyond rank 2 is a fraction of the cubes'.
+        let small = |spec: &MotionSpec| MotionParams {
+            motion_scale: [0.05, 0.05],
+            ..spec.params
+        };
+        let beyond = |params: MotionParams| -> f64 {
+            let mut generator = MotionGenerator::new(5, params).unwrap();
+            let shares: Vec<f64> = (0..6)
+                .map(|i| {
+                    let m = generator.sample(&format!("s{i}"));
+                    beyond_rank(&group(&m.sample, 1), 2)
+                })
+                .collect();
+            shares.iter().sum::<f64>() / shares.len() as f64
+        };
+        let (flat, solid) = (beyond(small(&all)), beyond(small(&plain)));
+        assert!(flat < 0.2 * solid, "flat {flat}, solid {solid}");
+        let m = MotionGenerator::new(21, plain.params)
+            .unwrap()
+            .sample("cube");
+        assert!(m.truth.flat.iter().all(|&f| !f));
+        assert!(
+            m.truth
+                .body
+                .iter()
+                .flatten()
+                .any(|(motion, body)| *motion > 0 && body[2] != 0.0)
+        );
+        let bad = "planar=1.5".parse::<MotionSpec>().unwrap_err().to_string();
+        assert!(bad.starts_with("planar=1.5"), "{bad}");
     }
 
     #[test]

@@ -55,6 +55,10 @@ pub struct GenMotionJob {
     /// frames), written as each file's `visible` mask, in [0, 1) [default: 0].
     #[arg(long)]
     pub dropout: Option<String>,
+    /// Probability that an object is flat (points on a square patch, as a checkerboard), drawn
+    /// per sample, in [0, 1] [default: 0].
+    #[arg(long)]
+    pub planar: Option<String>,
 }
 
 /// The flags of `gen-twoview`; unset ranges keep [`TwoViewParams::new`]'s for the mode.
@@ -144,6 +148,7 @@ impl GenMotionJob {
             width: range("--width", self.width.as_deref(), d.width)?,
             dropout: range("--dropout", self.dropout.as_deref(), d.dropout)?,
             height: range("--height", self.height.as_deref(), d.height)?,
+            planar: range("--planar", self.planar.as_deref(), d.planar)?,
         };
         params.validate()?;
         Ok(MotionSpec {
