@@ -1293,6 +1293,19 @@ mod tests {
     /// Dropout: a share of the tracks seen in one run of 2 or more consecutive frames, at least
     /// two seen throughout, the rows as without it; no dropout draws nothing (the same samples
     /// as before it existed), and the spec prints it only when set.
+    /// An optional setting is printed only when set: absent from `plain`'s text, last in
+    /// `with`'s, which parses back to `with`.
+    fn printed_only_when_set(plain: &MotionSpec, with: &MotionSpec, setting: &str) {
+        let key = setting.split('=').next().unwrap_or(setting);
+        assert!(!plain.to_string().contains(key));
+        let text = with.to_string();
+        assert!(text.ends_with(&format!(",{setting}")), "{text}");
+        assert_eq!(
+            text["motion:".len()..].parse::<MotionSpec>().unwrap(),
+            *with
+        );
+    }
+
     #[test]
     fn dropout_hides_runs_of_frames_and_leaves_the_rest_as_it_was() {
         let plain: MotionSpec = "count=4,seed=9,frames=12,motions=2-3,points=20-30"
@@ -1301,10 +1314,7 @@ mod tests {
         let spec: MotionSpec = "count=4,seed=9,frames=12,motions=2-3,points=20-30,dropout=0.5"
             .parse()
             .unwrap();
-        assert!(!plain.to_string().contains("dropout"));
-        assert!(spec.to_string().ends_with(",dropout=0.5"));
-        let text = spec.to_string();
-        assert_eq!(text["motion:".len()..].parse::<MotionSpec>().unwrap(), spec);
+        printed_only_when_set(&plain, &spec, "dropout=0.5");
         let a: Vec<SequenceFile> = plain.files().unwrap().collect();
         let b: Vec<SequenceFile> = spec.files().unwrap().collect();
         // The first sample is drawn before any dropout: its rows are the same.
@@ -1333,10 +1343,7 @@ mod tests {
         let plain: MotionSpec = base.parse().unwrap();
         let none: MotionSpec = format!("{base},planar=0").parse().unwrap();
         let all: MotionSpec = format!("{base},planar=1").parse().unwrap();
-        assert!(!plain.to_string().contains("planar"));
-        assert!(all.to_string().ends_with(",planar=1"));
-        let text = all.to_string();
-        assert_eq!(text["motion:".len()..].parse::<MotionSpec>().unwrap(), all);
+        printed_only_when_set(&plain, &all, "planar=1");
         // Asking for none draws nothing more: the same samples.
         let a: Vec<SequenceFile> = plain.files().unwrap().collect();
         let b: Vec<SequenceFile> = none.files().unwrap().collect();
