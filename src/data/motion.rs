@@ -44,7 +44,7 @@
 //! - a flat object (`--planar`: each object is flat with the sample's probability, uniform in
 //!   that range, default 0): its points uniform on the square of the same half-size in its body
 //!   frame's x-y plane (z = 0), turned and moved as any object: a planar patch such as a
-//!   checkerboard, whose tracks under an affine camera span a subspace of rank 3, not 4.
+//!   checkerboard, whose centred tracks under an affine camera span 2 dimensions, not 3.
 //!
 //! Each motion has `n` tracks, `n` uniform in the `--points` range (default 30 to 200).
 //!
@@ -733,9 +733,12 @@ impl MotionSample {
                 self.outliers
             );
         }
-        let flat: Vec<String> = (0..t.flat.len())
-            .filter(|&m| t.flat[m])
-            .map(|m| (m + 1).to_string())
+        let flat: Vec<String> = t
+            .flat
+            .iter()
+            .enumerate()
+            .filter(|&(_, &f)| f)
+            .map(|(m, _)| (m + 1).to_string())
             .collect();
         if !flat.is_empty() {
             source += &format!(
@@ -1290,9 +1293,6 @@ mod tests {
         ));
     }
 
-    /// Dropout: a share of the tracks seen in one run of 2 or more consecutive frames, at least
-    /// two seen throughout, the rows as without it; no dropout draws nothing (the same samples
-    /// as before it existed), and the spec prints it only when set.
     /// An optional setting is printed only when set: absent from `plain`'s text, last in
     /// `with`'s, which parses back to `with`.
     fn printed_only_when_set(plain: &MotionSpec, with: &MotionSpec, setting: &str) {
@@ -1306,6 +1306,9 @@ mod tests {
         );
     }
 
+    /// Dropout: a share of the tracks seen in one run of 2 or more consecutive frames, at least
+    /// two seen throughout, the rows as without it; no dropout draws nothing (the same samples
+    /// as before it existed), and the spec prints it only when set.
     #[test]
     fn dropout_hides_runs_of_frames_and_leaves_the_rest_as_it_was() {
         let plain: MotionSpec = "count=4,seed=9,frames=12,motions=2-3,points=20-30"
