@@ -7,6 +7,13 @@
 //! singular vector of the smallest singular value (QR + one-sided Jacobi SVD,
 //! [`null_vector`]). Then H = T₂⁻¹·Ĥ·T₁.
 //!
+//! **Four correspondences** (the minimal samples of the robust fit) determine H exactly, and it
+//! is solved directly (HZ §2.3, the projective basis): A maps e₁, e₂, e₃ and (1, 1, 1) onto the
+//! four normalised points of image 1, B onto those of image 2, and Ĥ = B·A⁻¹. The columns of A
+//! are λᵢ·(x̂ᵢ, ŷᵢ, 1) with λ solving Σᵢ₌₁³ λᵢ·x̂ᵢ = x̂₄; where three of the four points lie on
+//! a line some λᵢ vanishes (below 10⁻⁶ of the largest) and no single H maps them. It is the
+//! DLT's answer, without its eigen-decomposition.
+//!
 //! **Gauge.** H is returned with ‖h‖ = 1 (Frobenius) and `h[8]` > 0 (the first non-zero entry
 //! positive if `h[8]` = 0), see [`unit_norm_sign`]. An affine map is returned as its 2 × 3 matrix
 //! (`h[8]` = 1).
@@ -114,6 +121,28 @@ fn normalised(points: &[[f64; 4]], weights: &[f64]) -> Result<TwoView, GeometryE
     Ok(tv)
 }
 
+/// The homography that maps the four points `from` onto `to` exactly: B·A⁻¹ (module docs).
+/// `None` where three of either four lie on a line.
+fn four_point(from: &[[f64; 2]], to: &[[f64; 2]]) -> Option<Mat3> {
+    let a = basis_map(from)?;
+    let b = basis_map(to)?;
+    Some(mat3_mul(&b, &mat3_inverse(&a)?))
+}
+
+/// The map of the projective basis e₁, e₂, e₃, (1, 1, 1) onto four points: columns
+/// λᵢ·(xᵢ, yᵢ, 1), with λ solving Σᵢ₌₁³ λᵢ·(xᵢ, yᵢ, 1) = (x₄, y₄, 1).
+fn basis_map(q: &[[f64; 2]]) -> Option<Mat3> {
+    let m = [
+        q[0][0], q[1][0], q[2][0], q[0][1], q[1][1], q[2][1], 1.0, 1.0, 1.0,
+    ];
+    let lambda = mat3_vec(&mat3_inverse(&m)?, [q[3][0], q[3][1], 1.0]);
+    let largest = lambda.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    if lambda.iter().any(|v| !(v.abs() > NULLITY * largest)) {
+        return None;
+    }
+    Some(std::array::from_fn(|i| m[i] * lambda[i % 3]))
+}
+
 /// H = T₂⁻¹·Ĥ·T₁.
 fn denormalise(tv: &TwoView, hn: &Mat3) -> Mat3 {
     mat3_mul(&mat3_mul(&tv.t2.inverse_matrix(), hn), &tv.t1.matrix())
@@ -142,6 +171,11 @@ impl Estimator for HomographyEstimator {
 
     fn fit(&self, points: &[[f64; 4]], weights: &[f64]) -> Result<Homography, GeometryError> {
         let tv = normalised(points, weights)?;
+        if points.len() == 4 && weights.iter().all(|&w| w > 0.0) {
+            let hn = four_point(&tv.q1, &tv.q2).ok_or(GeometryError::HomographyUndetermined)?;
+            let h = unit_norm_sign(&denormalise(&tv, &hn)).ok_or(GeometryError::NoHomography)?;
+            return Homography::new(h).ok_or(GeometryError::SingularHomography);
+        }
         let mut rows: Vec<[f64; 9]> = Vec::with_capacity(2 * points.len());
         for ((a, b), &w) in tv.q1.iter().zip(&tv.q2).zip(weights) {
             if w <= 0.0 {
@@ -620,6 +654,50 @@ pub(super) mod tests {
                     );
                 }
             }
+        }
+    }
+
+    #[test]
+    fn four_correspondences_are_solved_as_the_dlt_solves_them() {
+        let mut rng = Rng::new(3);
+        for _ in 0..20 {
+            let (rows, truth) = planar_scene(&mut rng, 4, 0.0, 0.0, 0);
+            let pts: Vec<[f64; 4]> = rows.iter().map(|r| [r[0], r[1], r[2], r[3]]).collect();
+            let direct = HomographyEstimator.fit(&pts, &[1.0; 4]).unwrap();
+            // The DLT of the same four rows: a fifth row of zero weight keeps the direct path out.
+            let mut five = pts.clone();
+            five.push(pts[0]);
+            let dlt = HomographyEstimator
+                .fit(&five, &[1.0, 1.0, 1.0, 1.0, 0.0])
+                .unwrap();
+            // The same H (the DLT's eigen-decomposition of ÂᵀÂ resolves it to ~1e-8), and the
+            // direct solve is at least as exact on the four points.
+            let gap = direct.h.iter().zip(&dlt.h).map(|(a, b)| (a - b).abs());
+            assert!(gap.fold(0.0, f64::max) < 1e-6, "{:?} {:?}", direct.h, dlt.h);
+            assert!(error_against_truth(&direct, &truth) < 1e-6);
+            let worst = |h: &Homography| {
+                pts.iter()
+                    .map(|p| transfer_distance(h, p))
+                    .fold(0.0, f64::max)
+            };
+            assert!(
+                worst(&direct) <= worst(&dlt).max(1e-9),
+                "{} {}",
+                worst(&direct),
+                worst(&dlt)
+            );
+        }
+        // Three of the four on a line, in either image: no single H maps them.
+        let on_line = [[0.0, 0.0], [100.0, 0.0], [200.0, 0.0], [50.0, 80.0]];
+        let spread = [[10.0, 5.0], [120.0, 0.0], [190.0, 90.0], [40.0, 100.0]];
+        for (a, b) in [(on_line, spread), (spread, on_line)] {
+            let pts: Vec<[f64; 4]> = (0..4)
+                .map(|i| [a[i][0], a[i][1], b[i][0], b[i][1]])
+                .collect();
+            assert_eq!(
+                HomographyEstimator.fit(&pts, &[1.0; 4]).err(),
+                Some(GeometryError::HomographyUndetermined)
+            );
         }
     }
 
