@@ -4,8 +4,8 @@
 //! similarity (x̂ = T·x: centroid to the origin, mean distance √2). Each correspondence gives
 //! two rows of Â·ĥ = 0 (w₂ = 1):
 //! `[0ᵀ, −x̂₁ᵀ, ŷ₂x̂₁ᵀ]` and `[x̂₁ᵀ, 0ᵀ, −x̂₂x̂₁ᵀ]`, scaled by √wᵢ for weighted fits; ĥ is the right
-//! singular vector of the smallest singular value (QR + one-sided Jacobi SVD,
-//! [`null_vector`]). Then H = T₂⁻¹·Ĥ·T₁.
+//! singular vector of the smallest singular value, taken as the eigenvector of ÂᵀÂ's smallest
+//! eigenvalue ([`null_vector`]). Then H = T₂⁻¹·Ĥ·T₁.
 //!
 //! **Four correspondences** (the minimal samples of the robust fit) determine H exactly, and it
 //! is solved directly (HZ §2.3, the projective basis): A maps e₁, e₂, e₃ and (1, 1, 1) onto the
