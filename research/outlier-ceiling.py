@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """How well any method could tell gross outliers from curve points in LCE sets: each true curve
-fitted on its own true points (total least squares for the line, Fitzgibbon's direct fit for the
-conics), then every point's distance to the nearest fitted curve. A point is called an outlier
+fitted on its own true points (total least squares for the line, taken whole as the server's
+line model is; Fitzgibbon's direct fit for the conics), then every point's distance to the
+nearest fitted curve. A point is called an outlier
 when that distance exceeds t x sigma (sigma: the generator's noise, `--noise`); the precision and
 recall of those calls, for several t, bound what a fit with the true models and a threshold
 could reach. Uniform outliers that fall inside a curve's band are indistinguishable from its
@@ -21,13 +22,14 @@ import json
 import numpy as np
 
 
-def curve_samples(pts, kind):
-    """Dense samples of the curve of `kind` fitted on `pts` [n, 2] -> [m, 2]."""
+def distance_to_curve(pts, kind):
+    """The curve of `kind` fitted on `pts` [n, 2], as a function of points [m, 2] -> their
+    distances to it [m]."""
     if kind == "Line":
         c = pts.mean(0)
-        d = np.linalg.svd(pts - c)[2][0]
-        t = (pts - c) @ d
-        return c + np.linspace(t.min(), t.max(), 2000)[:, None] * d
+        normal = np.linalg.svd(pts - c)[2][1]
+        # The infinite line, as the server's line model: no segment ends.
+        return lambda q: np.abs((q - c) @ normal)
     x, y = pts[:, 0], pts[:, 1]
     design = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], 1)
     scatter = design.T @ design
@@ -42,7 +44,8 @@ def curve_samples(pts, kind):
     values, vectors = np.linalg.eigh(m)
     axes = np.sqrt(level / values)
     th = np.linspace(0, 2 * np.pi, 4000)
-    return centre + (vectors @ np.stack([axes[0] * np.cos(th), axes[1] * np.sin(th)])).T
+    curve = centre + (vectors @ np.stack([axes[0] * np.cos(th), axes[1] * np.sin(th)])).T
+    return lambda q: np.array([np.min(np.linalg.norm(curve - p, axis=1)) for p in q])
 
 
 def main():
@@ -55,9 +58,8 @@ def main():
         d = json.load(open(path))
         pts, labels = np.array(d["points"]), np.array(d["labels"])
         kinds = d["source"].split("shapes [")[1].split("]")[0].split(", ")
-        curves = np.concatenate(
-            [curve_samples(pts[labels == g + 1], k) for g, k in enumerate(kinds)])
-        dist = np.array([np.min(np.linalg.norm(curves - p, axis=1)) for p in pts])
+        dist = np.min([distance_to_curve(pts[labels == g + 1], k)(pts)
+                       for g, k in enumerate(kinds)], axis=0)
         inliers += list(dist[labels > 0])
         outliers += list(dist[labels == 0])
     inliers, outliers = np.array(inliers), np.array(outliers)

@@ -10,9 +10,12 @@
 //! **Four correspondences** (the minimal samples of the robust fit) determine H exactly, and it
 //! is solved directly (HZ §2.3, the projective basis): A maps e₁, e₂, e₃ and (1, 1, 1) onto the
 //! four normalised points of image 1, B onto those of image 2, and Ĥ = B·A⁻¹. The columns of A
-//! are λᵢ·(x̂ᵢ, ŷᵢ, 1) with λ solving Σᵢ₌₁³ λᵢ·x̂ᵢ = x̂₄; where three of the four points lie on
-//! a line some λᵢ vanishes (below 10⁻⁶ of the largest) and no single H maps them. It is the
-//! DLT's answer, without its eigen-decomposition.
+//! are λᵢ·(x̂ᵢ, ŷᵢ, 1) with λ solving Σᵢ₌₁³ λᵢ·x̂ᵢ = x̂₄. By Cramer's rule λᵢ = Dᵢ / D, with D
+//! twice the area of the triangle of points 1 to 3 and Dᵢ that of the triangle with point 4 in
+//! place of point i: where three of the four points lie on a line, one of these areas vanishes
+//! and no single H maps them. The sample is refused when any area is below 10⁻⁶ of the largest
+//! (some λᵢ below 10⁻⁶ of the largest, or the largest above 10⁶). It is the DLT's answer, without
+//! its eigen-decomposition.
 //!
 //! **Gauge.** H is returned with ‖h‖ = 1 (Frobenius) and `h[8]` > 0 (the first non-zero entry
 //! positive if `h[8]` = 0), see [`unit_norm_sign`]. An affine map is returned as its 2 × 3 matrix
@@ -137,7 +140,8 @@ fn basis_map(q: &[[f64; 2]]) -> Option<Mat3> {
     ];
     let lambda = mat3_vec(&mat3_inverse(&m)?, [q[3][0], q[3][1], 1.0]);
     let largest = lambda.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-    if lambda.iter().any(|v| !(v.abs() > NULLITY * largest)) {
+    // λᵢ = Dᵢ / D: a vanishing Dᵢ, or a vanishing D (points 1 to 3 on a line).
+    if lambda.iter().any(|v| !(v.abs() > NULLITY * largest)) || !(largest < 1.0 / NULLITY) {
         return None;
     }
     Some(std::array::from_fn(|i| m[i] * lambda[i % 3]))
@@ -687,10 +691,14 @@ pub(super) mod tests {
                 worst(&dlt)
             );
         }
-        // Three of the four on a line, in either image: no single H maps them.
-        let on_line = [[0.0, 0.0], [100.0, 0.0], [200.0, 0.0], [50.0, 80.0]];
+        // Three of the four on a line, in either image, whichever three (the first three, or
+        // two of them with the fourth; also nearly on a line): no single H maps them.
         let spread = [[10.0, 5.0], [120.0, 0.0], [190.0, 90.0], [40.0, 100.0]];
-        for (a, b) in [(on_line, spread), (spread, on_line)] {
+        let first_three = [[0.0, 0.0], [100.0, 0.0], [200.0, 0.0], [50.0, 80.0]];
+        let with_fourth = [[0.0, 0.0], [50.0, 80.0], [100.0, 0.0], [200.0, 0.0]];
+        let nearly = [[0.0, 0.0], [100.0, 1e-5], [200.0, 0.0], [50.0, 80.0]];
+        let lines = [first_three, with_fourth, nearly];
+        for (a, b) in lines.iter().flat_map(|&l| [(l, spread), (spread, l)]) {
             let pts: Vec<[f64; 4]> = (0..4)
                 .map(|i| [a[i][0], a[i][1], b[i][0], b[i][1]])
                 .collect();
