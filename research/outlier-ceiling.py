@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """How well any method could tell gross outliers from curve points in LCE sets: each true curve
-fitted on its own true points (total least squares for the line, taken whole as the server's
-line model is; Fitzgibbon's direct fit for the conics), then every point's distance to the
-nearest fitted curve. A point is called an outlier
+fitted on its own true points (the least-squares fits of `lce-ransac.py`: the line taken whole,
+as the server's line model is; the algebraic circle; Fitzgibbon's direct ellipse fit), then
+every point's geometric distance to the nearest fitted curve. A point is called an outlier
 when that distance exceeds t x sigma (sigma: the generator's noise, `--noise`); the precision and
 recall of those calls, for several t, bound what a fit with the true models and a threshold
 could reach. Uniform outliers that fall inside a curve's band are indistinguishable from its
@@ -12,32 +12,30 @@ points.
         --scale 2 --outliers 0.2
     python3 research/outlier-ceiling.py runs/data/lce-o20 [--noise 0.05]
 
-Needs numpy. Reads the generator's file format (outliers labelled 0, the curve types in
-`source`).
+Needs numpy and scipy (through lce-ransac.py). Reads the generator's file format (outliers
+labelled 0, the curve types in `source`).
 """
 import argparse
 import glob
+import importlib.util
 import json
+from pathlib import Path
 
 import numpy as np
 
+# The fits and the shape list of the sequential-RANSAC baseline (research/lce-ransac.py).
+_spec = importlib.util.spec_from_file_location("lce_ransac", Path(__file__).with_name("lce-ransac.py"))
+lce_ransac = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(lce_ransac)
+
 
 def distance_to_curve(pts, kind):
-    """The curve of `kind` fitted on `pts` [n, 2], as a function of points [m, 2] -> their
-    distances to it [m]."""
-    if kind == "Line":
-        c = pts.mean(0)
-        normal = np.linalg.svd(pts - c)[2][1]
+    """The curve of `kind` fitted on `pts` [n, 2] (lce-ransac.py's least-squares fits), as a
+    function of points [m, 2] -> their geometric distances to it [m]."""
+    a, b, c, d, e, f = lce_ransac.MODELS[kind][2](pts)
+    if kind == "line":
         # The infinite line, as the server's line model: no segment ends.
-        return lambda q: np.abs((q - c) @ normal)
-    x, y = pts[:, 0], pts[:, 1]
-    design = np.stack([x * x, x * y, y * y, x, y, np.ones_like(x)], 1)
-    scatter = design.T @ design
-    constraint = np.zeros((6, 6))
-    constraint[0, 2] = constraint[2, 0] = 2
-    constraint[1, 1] = -1
-    w, v = np.linalg.eig(np.linalg.solve(scatter, constraint))
-    a, b, c, d, e, f = np.real(v[:, np.argmax(np.real(w))])
+        return lambda q: np.abs(d * q[:, 0] + e * q[:, 1] + f)
     m = np.array([[a, b / 2], [b / 2, c]])
     centre = np.linalg.solve(2 * m, -np.array([d, e]))
     level = -(f + centre @ m @ centre + d * centre[0] + e * centre[1])
@@ -57,7 +55,8 @@ def main():
     for path in sorted(glob.glob(f"{args.dir}/*.json")):
         d = json.load(open(path))
         pts, labels = np.array(d["points"]), np.array(d["labels"])
-        kinds = d["source"].split("shapes [")[1].split("]")[0].split(", ")
+        found = lce_ransac.SHAPES.search(d.get("source") or "")
+        kinds = [k.strip().lower() for k in found.group(1).split(",")]
         dist = np.min([distance_to_curve(pts[labels == g + 1], k)(pts)
                        for g, k in enumerate(kinds)], axis=0)
         inliers += list(dist[labels > 0])

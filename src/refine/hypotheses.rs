@@ -432,14 +432,14 @@ fn best_swap(pool: &[Vec<f64>], chosen: &[usize]) -> Option<(usize, usize, f64)>
         }
     }
     debug_assert!(pool.iter().all(|costs| costs.len() == n));
-    // gains[h * m + at]: the gain of swapping pool entry h in for position at.
-    let mut gains = vec![f64::NEG_INFINITY; pool.len() * m];
+    // gains[h * m + at]: the gain of swapping pool entry h in for position at (chosen entries'
+    // are never read).
+    let mut gains = vec![0.0; pool.len() * m];
     for (h, costs) in pool.iter().enumerate() {
         if chosen.contains(&h) {
             continue;
         }
         let to = &mut gains[h * m..(h + 1) * m];
-        to.fill(0.0);
         let mut shared = 0.0;
         for i in 0..n {
             let (c, f) = (costs[i], first[i]);
