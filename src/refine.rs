@@ -60,7 +60,10 @@
 //!
 //! **Noise and threshold.** The noise level σ is the median of the groups' robust noise levels
 //! (each 1.4826 × the median residual inside its group, [`geometry::Fit::sigma`]): the sensor's
-//! noise, shared by every structure, and not moved by one group of outliers. τ = [`OUTLIER_SIGMAS`]
+//! noise, shared by every structure, and not moved by one group of outliers. Groups fitted on
+//! fewer than [`NOISE_VOTE_POINTS`] times the points that determine their model do not vote:
+//! their fit absorbs the noise, and in a sparse set (an AdelaideRMF pair subsampled to 25 %)
+//! several such groups pulled σ, and τ with it, below the sensor's. τ = [`OUTLIER_SIGMAS`]
 //! × σ, or the caller's `outlier_threshold`. A learned group whose robust fit explains less than
 //! [`OUTLIER_GROUP_INLIERS`] of its points, or whose own noise level exceeds
 //! [`OUTLIER_GROUP_SIGMAS`] × σ, follows no model: it is the outlier group that models trained
@@ -106,6 +109,10 @@ pub const OUTLIER_GROUP_INLIERS: f64 = 0.5;
 pub const OUTLIER_GROUP_SIGMAS: f64 = 3.0;
 /// Two structures whose joint fit is within this many σ merge.
 pub const MERGE_SIGMAS: f64 = 1.5;
+/// A learned group votes for the fit's noise level σ when it was fitted on at least this many
+/// times the points that determine its model: on fewer, the fit takes up most of the residual
+/// (a homography through 5 correspondences leaves a median residual near 0).
+pub const NOISE_VOTE_POINTS: usize = 2;
 
 /// What refinement may do.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -558,15 +565,23 @@ fn keeps_shrunk_structures(family: Family) -> bool {
     family != Family::Subspace
 }
 
-/// The fit's noise level: the median of the live, non-degenerate groups' own levels (0 when
-/// none has one).
+/// The fit's noise level: the median of the live, non-degenerate groups' own levels, over the
+/// groups that measure one ([`NOISE_VOTE_POINTS`]; all of them when none does); 0 when none has
+/// a level.
 fn noise_level(groups: &[Option<Group>]) -> f64 {
-    let mut s: Vec<f64> = groups
-        .iter()
-        .flatten()
-        .filter(|g| !g.frozen && g.fit.sigma.is_finite())
-        .map(|g| g.fit.sigma)
-        .collect();
+    let levels = |min_points: usize| -> Vec<f64> {
+        groups
+            .iter()
+            .flatten()
+            .filter(|g| !g.frozen && g.fit.sigma.is_finite())
+            .filter(|g| g.fitted_on.len() >= min_points * g.fit.model.min_points())
+            .map(|g| g.fit.sigma)
+            .collect()
+    };
+    let mut s = levels(NOISE_VOTE_POINTS);
+    if s.is_empty() {
+        s = levels(0);
+    }
     if s.is_empty() {
         return 0.0;
     }
@@ -1046,6 +1061,32 @@ mod tests {
             start: 1,
             frozen: false,
         })
+    }
+
+    #[test]
+    fn groups_fitted_on_too_few_points_do_not_vote_for_the_noise_level() {
+        let group = |sigma: f64, points: usize| {
+            let mut g = line_group(0.0);
+            if let Some(g) = g.as_mut() {
+                g.fit.sigma = sigma;
+                g.fitted_on = (0..points).collect();
+            }
+            g
+        };
+        // A line is determined by 2 points: groups of 3 do not vote while one of 4 or more does.
+        let groups = [group(1e-3, 3), group(0.5, 40), group(2e-3, 3)];
+        assert_eq!(noise_level(&groups), 0.5);
+        let groups = [
+            group(1e-3, 3),
+            group(0.5, 4),
+            group(0.7, 40),
+            group(2e-3, 3),
+        ];
+        assert_eq!(noise_level(&groups), 0.5);
+        // None measures one: all vote, as before.
+        let groups = [group(1e-3, 3), group(0.5, 2), group(2e-3, 3)];
+        assert_eq!(noise_level(&groups), 2e-3);
+        assert_eq!(noise_level(&[None, None]), 0.0);
     }
 
     #[test]
