@@ -392,11 +392,15 @@ pub fn cluster(
     let points = Points::new(&embedding.values, embedding.width)?;
     let windows = embedding.window_width < embedding.width;
     let mut clustering = if windows && !matches!(params.selection(), Selection::Fixed(_)) {
+        // The first window's rows at unit length, as the network gave them (side by side
+        // they were scaled by 1 / √windows): the residuals, and the K = 1 test on them, are
+        // those of one window's embedding.
+        let unscale = (embedding.width as f32 / embedding.window_width as f32).sqrt();
         let first: Vec<f32> = embedding
             .values
             .chunks_exact(embedding.width)
             .flat_map(|row| &row[..embedding.window_width])
-            .copied()
+            .map(|v| v * unscale)
             .collect();
         let first = Points::new(&first, embedding.window_width)?;
         let chosen = cluster::cluster_on(first, params, model.pool())?;
