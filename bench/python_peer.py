@@ -22,9 +22,7 @@ It does the same work as the Rust server for one point set:
 4. cluster the embeddings (`src/cluster.rs`) with scikit-learn: `KMeans(k-means++, n_init=4)`
    for K = 1..k_max (k_max + 1 for SOD, capped at N), the residual r(K) = inertia, and K chosen
    by the mean silhouette (`sklearn.metrics.silhouette_score`, on a seeded sample of 3000 points
-   beyond 3000, like the server) or by the SOD of log r(K); K = 1 when r(1)/N < 0.01. With
-   several windows read and K chosen, K (and the residual curve answered) comes from the first
-   window's embedding, and the whole embedding is clustered at that K, as the server does.
+   beyond 3000, like the server) or by the SOD of log r(K); K = 1 when r(1)/N < 0.01.
 
 The peer has no geometric refinement (the server's stage 5): where the server refines by
 default (tracks of 15 frames or more for `kt3dmoseg` and `motion`, `lce`, `adelaide-homography`), it does
@@ -261,19 +259,13 @@ class Model:
         # Windows side by side, scaled so that every row keeps unit length.
         z = np.hstack(blocks) / np.float32(np.sqrt(len(blocks))) if len(blocks) > 1 else blocks[0]
         t1 = time.perf_counter()
-        settings = dict(
+        result = cluster(
+            z,
+            k=k,
             k_max=self.card["k_max"] if k_max is None else k_max,
             selection=self.card["selection"] if selection is None else selection,
             seed=seed,
         )
-        if k is None and len(blocks) > 1:
-            # K chosen on the first window's embedding, the whole clustered at that K.
-            first = cluster(blocks[0], **settings)
-            result = cluster(z, k=first["k"], seed=seed)
-            for key in ("selection", "residuals", "scores"):
-                result[key] = first[key]
-        else:
-            result = cluster(z, k=k, **settings)
         t2 = time.perf_counter()
         result["embeddings"] = z
         result["timing_ms"] = {

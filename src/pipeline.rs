@@ -13,8 +13,7 @@
 //!    images under the card's test-time symmetries; each point's unit embeddings side by side,
 //!    scaled to unit length.
 //! 4. **cluster** ([`cluster`]): k-means on the embeddings, K given or chosen from the residual
-//!    curve (SOD or silhouette); with several frame windows read, K is chosen on the first
-//!    window's embedding, the network's own reading of a clip.
+//!    curve (SOD or silhouette).
 //! 5. **refine** ([`crate::refine`]): an explicit model per group (line, circle, ellipse,
 //!    homography, fundamental matrix, motion subspace), fitted on the input as sent (every frame,
 //!    caller's units); points reassigned to the structure they fit best, outliers labelled −1.
@@ -255,9 +254,6 @@ pub struct Embedding {
     /// Row-major `[m, width]`: the points read, in input order.
     pub values: Vec<f32>,
     pub width: usize,
-    /// The width of the first frame window's block, the first columns of a row: `width` when
-    /// one window is read.
-    pub window_width: usize,
     /// For each input row, its row in `values` (its own, or its nearest read point's); `None`
     /// when every row was read (m = n).
     pub owner: Option<Vec<usize>>,
@@ -315,7 +311,6 @@ pub fn embed(
     Ok(Embedding {
         values,
         width,
-        window_width: block_width,
         owner,
     })
 }
@@ -379,39 +374,14 @@ fn side_by_side(mut blocks: Vec<Vec<f32>>, width: usize) -> Vec<f32> {
 
 /// Stage 4: clusters embeddings from [`embed`] on the model's threads: `[m, width]` -> K, the
 /// residual curve and one label per input point (a point that was not read takes its nearest
-/// read point's). With several frame windows read and K chosen, K and its residual curve come
-/// from the first window's block `[m, window_width]` alone, and the whole embedding is
-/// clustered at that K: the network learned clips of its frame count, and SOD on W windows side
-/// by side over-counts (KT3DMoSeg every frame, SOD's K right on 50.0 % of the folds, on 63.6 %
-/// so).
+/// read point's).
 pub fn cluster(
     model: &LoadedModel,
     embedding: &Embedding,
     params: &ClusterParams,
 ) -> Result<Clustering, FitError> {
     let points = Points::new(&embedding.values, embedding.width)?;
-    let windows = embedding.window_width < embedding.width;
-    let mut clustering = if windows && !matches!(params.selection(), Selection::Fixed(_)) {
-        // The first window's rows at unit length, as the network gave them (side by side
-        // they were scaled by 1 / √windows): the residuals, and the K = 1 test on them, are
-        // those of one window's embedding.
-        let unscale = (embedding.width as f32 / embedding.window_width as f32).sqrt();
-        let first: Vec<f32> = embedding
-            .values
-            .chunks_exact(embedding.width)
-            .flat_map(|row| &row[..embedding.window_width])
-            .map(|v| v * unscale)
-            .collect();
-        let first = Points::new(&first, embedding.window_width)?;
-        let chosen = cluster::cluster_on(first, params, model.pool())?;
-        let mut whole = cluster::cluster_on(points, &params.with_fixed_k(chosen.k)?, model.pool())?;
-        whole.selection = chosen.selection;
-        whole.residuals = chosen.residuals;
-        whole.scores = chosen.scores;
-        whole
-    } else {
-        cluster::cluster_on(points, params, model.pool())?
-    };
+    let mut clustering = cluster::cluster_on(points, params, model.pool())?;
     if let Some(owner) = &embedding.owner {
         clustering.labels = owner.iter().map(|&o| clustering.labels[o]).collect();
         clustering.cluster_sizes = vec![0; clustering.k];
@@ -1994,56 +1964,6 @@ pub(crate) mod tests {
         assert!(
             message.contains("thins") && message.contains("300"),
             "{message}"
-        );
-    }
-
-    #[test]
-    fn with_several_windows_read_k_is_chosen_on_the_first() {
-        let model = tiny(vec![]);
-        // 40 points, 2 values per window: the first window sees two tight groups of 20, the
-        // second splits each in two.
-        let values: Vec<f32> = (0..40)
-            .flat_map(|i| {
-                let first = if i < 20 { 1.0 } else { -1.0 };
-                let second = [0.6, -0.6, 0.6, -0.6][i / 10];
-                let jitter = (i % 10) as f32 * 1e-3;
-                [first + jitter, 0.0, second + jitter, 0.0]
-            })
-            .collect();
-        let one = Embedding {
-            values,
-            width: 4,
-            window_width: 4,
-            owner: None,
-        };
-        let two = Embedding {
-            window_width: 2,
-            ..one.clone()
-        };
-        let sod = ClusterParams::builder()
-            .selection(Selection::Sod)
-            .k_max(6)
-            .build()
-            .unwrap();
-        assert_eq!(cluster(&model, &one, &sod).unwrap().k, 4);
-        let c = cluster(&model, &two, &sod).unwrap();
-        assert_eq!(c.k, 2);
-        assert_eq!(c.selection, Selection::Sod);
-        assert!(c.scores.len() > 1 && c.residuals.len() > 1, "{c:?}");
-        assert!(c.labels[..20].iter().all(|&l| l == c.labels[0]));
-        assert!(
-            c.labels[20..]
-                .iter()
-                .all(|&l| l == c.labels[20] && l != c.labels[0])
-        );
-        // A K given clusters the whole embedding as before.
-        let fixed = ClusterParams::builder()
-            .selection(Selection::Fixed(4))
-            .build()
-            .unwrap();
-        assert_eq!(
-            cluster(&model, &two, &fixed).unwrap(),
-            cluster(&model, &one, &fixed).unwrap()
         );
     }
 
