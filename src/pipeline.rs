@@ -18,7 +18,7 @@
 //!    homography, fundamental matrix, motion subspace), fitted on the input as sent (every frame,
 //!    caller's units); points reassigned to the structure they fit best, outliers labelled −1.
 //!    With K chosen, the k + 1 clustering is refined too and answers where it parts structures
-//!    that pooled two ([`refine_chosen`]); with a k given, where the outliers take a group of
+//!    that pooled two, and from it the k + 2 one, and so on ([`refine_chosen`]); with a k given, where the outliers take a group of
 //!    their own, and the clustering K chosen would give answers where its k structures are far
 //!    less noisy ([`crate::refine::replaces_given`]).
 //! 6. **answer** ([`FitOutcome`]): labels, K, structures, the residual curve and the stage
@@ -419,7 +419,8 @@ pub fn refine(
 /// Stage 5 with K chosen automatically: the clustering refined, and the k + 1 clustering
 /// refined too where the choice considered k + 1 (the two side by side on the model's threads);
 /// the wider answer is kept where it splits a structure that pooled two
-/// ([`refine::splits_pooled`]). SOD stops at k when splitting a group lowers the embeddings'
+/// ([`refine::splits_pooled`]), and then the k + 2 clustering is tried against it in the same
+/// way, and so on ([`refine::split_while_pooled`]). SOD stops at k when splitting a group lowers the embeddings'
 /// residual little, and refinement cannot split a structure that holds two planes or curves:
 /// their pooled fit sets a noise level under which both fit. A K the caller gave, and motion
 /// subspaces, are refined as they are. -> the clustering the answer came from (with both
@@ -446,10 +447,17 @@ pub fn refine_chosen(
         || refine(model, points, clustering, r),
         || refine(model, points, &wider, r),
     );
-    Ok(if refine::splits_pooled(&refined, &again, points.len()) {
-        (both_ks(clustering, wider), again)
-    } else {
-        (clustering.clone(), refined)
+    if !refine::splits_pooled(&refined, &again, points.len()) {
+        return Ok((clustering.clone(), refined));
+    }
+    // Each further split is tried only once the one before it was taken, one at a time.
+    refine::split_while_pooled((both_ks(clustering, wider), again), points.len(), |from| {
+        if from.k + 1 > considered.min(read) {
+            return Ok(None);
+        }
+        let next = one_more_group(model, embedding, params, from)?;
+        let answer = refine(model, points, &next, r);
+        Ok(Some((both_ks(from, next), answer)))
     })
 }
 

@@ -54,9 +54,10 @@
 //! rounds nor the hypotheses part them. With K chosen the fit also refines the k + 1
 //! clustering ([`crate::pipeline::refine_chosen`]) and keeps that answer when it has at least as
 //! many structures, a noise level ([`Refined::noise`]) at most half the k answer's, and at most
-//! 5 % of the points more as outliers. On the AdelaideRMF homography folds SOD's K was right on
-//! 52.9 % of the pairs without it, 82.4 % with it, and 88.2 % once merging asked one of the two
-//! structures' models instead of both.
+//! 5 % of the points more as outliers; from an answer so kept it goes on to the k + 2
+//! clustering under the same test, and so on ([`split_while_pooled`]). On the AdelaideRMF
+//! homography folds SOD's K was right on 52.9 % of the pairs without it, 82.4 % with it, and
+//! 88.2 % once merging asked one of the two structures' models instead of both.
 //!
 //! **Noise and threshold.** The noise level σ is the median of the groups' robust noise levels
 //! (each 1.4826 × the median residual inside its group, [`geometry::Fit::sigma`]): the sensor's
@@ -232,6 +233,26 @@ pub fn replaces_given(given: &Refined, chosen: &Refined, k: usize, n: usize) -> 
 pub fn splits_pooled(answer: &Refined, wider: &Refined, n: usize) -> bool {
     wider.measured().count() >= answer.measured().count()
         && far_quieter(answer, wider, SPLIT_MORE_OUTLIERS * n as f64)
+}
+
+/// From `start` (a clustering's answer that split one with a group fewer), one group more at a
+/// time while each answer [`splits_pooled`] the one before: a set of several pooled pairs (or
+/// a structure that pooled three) is parted one split per step. `wider(&c)` clusters and
+/// refines one group more than `c`, or gives `None` where the choice of K considered no more.
+/// -> the last clustering that split, and its answer.
+pub fn split_while_pooled<C, E>(
+    start: (C, Refined),
+    n: usize,
+    mut wider: impl FnMut(&C) -> Result<Option<(C, Refined)>, E>,
+) -> Result<(C, Refined), E> {
+    let mut at = start;
+    while let Some(next) = wider(&at.0)? {
+        if !splits_pooled(&at.1, &next.1, n) {
+            break;
+        }
+        at = next;
+    }
+    Ok(at)
 }
 
 /// Whether `other`'s noise ([`Refined::noise`]) is finite and at most 1 /
@@ -927,6 +948,52 @@ mod tests {
             !splits_pooled(&none, &none, 3),
             "nothing measured either way"
         );
+    }
+
+    #[test]
+    fn splitting_goes_on_while_each_step_splits_and_stops_at_the_first_that_does_not() {
+        let circle = |label, inliers, rms| Structure {
+            label,
+            model: Model::Circle {
+                cx: 0.0,
+                cy: 0.0,
+                r: 1.0,
+            },
+            inliers,
+            rms,
+        };
+        // Answers of k = 1..=5 clusters, 120 points: each of k = 2 and 3 splits a pooled
+        // structure (its noise falls by more than half); k = 4 halves one (same noise), and k = 5
+        // would split again but is never reached.
+        let answer = |k: usize, rms: f64| Refined {
+            labels: (0..120).map(|i| (i % k) as i64).collect(),
+            structures: (0..k).map(|l| circle(l, 120 / k, rms)).collect(),
+            sigma: rms,
+        };
+        let noise = [8.0, 3.0, 1.0, 1.0, 0.1];
+        let mut asked = Vec::new();
+        let run = |last: usize, asked: &mut Vec<usize>| {
+            split_while_pooled((1usize, answer(1, noise[0])), 120, |&k| {
+                asked.push(k);
+                Ok::<_, ()>((k < last).then(|| (k + 1, answer(k + 1, noise[k]))))
+            })
+            .unwrap()
+        };
+        let (k, got) = run(5, &mut asked);
+        assert_eq!((k, got.structures.len(), got.sigma), (3, 3, 1.0));
+        assert_eq!(
+            asked,
+            [1, 2, 3],
+            "stops at the first step that does not split"
+        );
+        // Where the choice of K considered no more than 2, the k = 2 answer stands.
+        asked.clear();
+        let (k, _) = run(2, &mut asked);
+        assert_eq!((k, asked.as_slice()), (2, &[1, 2][..]));
+        // An error of a step is the caller's.
+        let failed =
+            split_while_pooled((1usize, answer(1, 8.0)), 120, |_| Err::<Option<_>, _>("no"));
+        assert_eq!(failed.err(), Some("no"));
     }
 
     #[test]
