@@ -900,9 +900,9 @@ mod tests {
         PointSet::from_flat(Kind::Points2d, 2, values).unwrap()
     }
 
-    #[test]
-    fn the_noise_of_an_answer_weighs_each_structure_by_its_points() {
-        let structure = |label, inliers, rms| Structure {
+    /// A unit circle as structure `label`, with `inliers` points at RMS `rms`.
+    fn circle_structure(label: usize, inliers: usize, rms: f64) -> Structure {
+        Structure {
             label,
             model: Model::Circle {
                 cx: 0.0,
@@ -911,7 +911,12 @@ mod tests {
             },
             inliers,
             rms,
-        };
+        }
+    }
+
+    #[test]
+    fn the_noise_of_an_answer_weighs_each_structure_by_its_points() {
+        let structure = circle_structure;
         // Circles spend 3 points: RMS 1 on 12 points counts as 1 · √(12 / 9) = 2 / √3, and 4 on 51
         // as 4 · √(51 / 48).
         let answer = Refined {
@@ -952,16 +957,7 @@ mod tests {
 
     #[test]
     fn splitting_goes_on_while_each_step_splits_and_stops_at_the_first_that_does_not() {
-        let circle = |label, inliers, rms| Structure {
-            label,
-            model: Model::Circle {
-                cx: 0.0,
-                cy: 0.0,
-                r: 1.0,
-            },
-            inliers,
-            rms,
-        };
+        let circle = circle_structure;
         // Answers of k = 1..=5 clusters, 120 points: each of k = 2 and 3 splits a pooled
         // structure (its noise falls by more than half); k = 4 halves one (same noise), and k = 5
         // would split again but is never reached.
