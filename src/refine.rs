@@ -867,6 +867,55 @@ mod tests {
         )
     }
 
+    /// A line, a circle and two ellipses, `m` points each, sent point by point in turn (point i
+    /// on curve i mod 4), with deterministic noise of about 0.03 across each curve.
+    fn four_curves_interleaved(m: usize) -> (PointSet, Vec<usize>) {
+        let (mut values, mut truth) = (Vec::new(), Vec::new());
+        for i in 0..4 * m {
+            let t = (i / 4) as f64 * std::f64::consts::TAU / m as f64;
+            let e = 0.03 * (((i * 7919) % 101) as f64 / 50.0 - 1.0);
+            let (c, s) = (t.cos(), t.sin());
+            values.extend(match i % 4 {
+                0 => [-6.0 + 12.0 * (i / 4) as f64 / m as f64, -7.0 + e],
+                1 => [4.0 + (2.0 + e) * c, 3.0 + (2.0 + e) * s],
+                2 => [-4.0 + (3.0 + e) * c, 2.0 + (1.2 + e) * s],
+                _ => [(1.5 + e) * c, -3.0 + (0.7 + e) * s],
+            });
+            truth.push(i % 4);
+        }
+        (
+            PointSet::from_flat(Kind::Points2d, 2, values).unwrap(),
+            truth,
+        )
+    }
+
+    #[test]
+    fn curves_sent_in_turn_are_all_seen_by_the_hypotheses() {
+        // Past 500 points the hypotheses see one row of every run of n / 500: at 2000 points a
+        // fixed stride of 4 would see the line alone, and its models took every structure's
+        // place (k = 1 with three curves answered -1, K chosen).
+        let (points, truth) = four_curves_interleaved(500);
+        for k_chosen in [None, Some(8)] {
+            let r = refine(
+                &points,
+                &truth,
+                4,
+                Family::Curves,
+                &RefineParams::default(),
+                k_chosen,
+            );
+            let outliers = r.labels.iter().filter(|&&l| l < 0).count();
+            assert_eq!(r.structures.len(), 4, "{k_chosen:?}");
+            assert!(outliers <= 60, "{k_chosen:?}: {outliers} outliers");
+            let types: Vec<&str> = r.structures.iter().map(|s| s.model.type_name()).collect();
+            assert_eq!(
+                types,
+                ["line", "circle", "ellipse", "ellipse"],
+                "{k_chosen:?}"
+            );
+        }
+    }
+
     /// [`two_circles`] (40 points each, noise 0.01) and two far points at (5, 8) and (-4, -6),
     /// started in groups 0 and 1: the points, the start labels and the circles' true labels.
     fn two_circles_and_two_far_points() -> (PointSet, Vec<usize>, Vec<usize>) {

@@ -45,8 +45,12 @@
 //! step of facility location with a label cost, as in PEARL's energy), and never past the
 //! k_max the choice of K considered.
 //!
-//! Cost is bounded: proposals and the choice see at most [`MAX_ROWS`] points (evenly in input
-//! order); the refinement rounds that follow refit every chosen model on all points.
+//! Cost is bounded: proposals and the choice see at most [`MAX_ROWS`] points (one drawn from
+//! each of as many equal runs of the input's rows); the refinement rounds that follow refit
+//! every chosen model on all points.
+
+use rand::rngs::ChaCha8Rng;
+use rand::{RngExt, SeedableRng};
 
 use crate::data::PointSet;
 use crate::geometry::{self, Family, Fit, Model};
@@ -74,6 +78,8 @@ pub const REPROPOSALS: usize = 2;
 pub const CHUNK_PER_THREAD: usize = 2;
 /// Points the proposals and the choice see at most.
 pub const MAX_ROWS: usize = 500;
+/// Seed of the draw of the rows seen in a set of more than [`MAX_ROWS`] points.
+const SEEN_ROWS_SEED: u64 = 500;
 
 /// One model the search brings in: the slot of the structure it replaces (`None`: a structure
 /// added), its fit, and the share of the points seen that it explains best (within τ).
@@ -237,12 +243,18 @@ impl Search {
     }
 }
 
-/// The rows proposals and the choice see: all, or [`MAX_ROWS`] evenly spread in input order.
+/// The rows proposals and the choice see: all, or [`MAX_ROWS`] spread over the input, one
+/// drawn from each of [`MAX_ROWS`] equal runs of consecutive rows (seeded, so a set is always
+/// seen the same way). A fixed stride would alias with a repeating row order: every fourth row
+/// of four curves sent point by point in turn is one curve.
 fn seen_rows(n: usize) -> Vec<usize> {
     if n <= MAX_ROWS {
         return (0..n).collect();
     }
-    (0..MAX_ROWS).map(|k| k * n / MAX_ROWS).collect()
+    let mut rng = ChaCha8Rng::seed_from_u64(SEEN_ROWS_SEED);
+    (0..MAX_ROWS)
+        .map(|k| rng.random_range(k * n / MAX_ROWS..(k + 1) * n / MAX_ROWS))
+        .collect()
 }
 
 /// Hypotheses of every type of `family`, each fitted on one neighbourhood and grown within
