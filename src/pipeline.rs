@@ -31,6 +31,7 @@ use std::time::Instant;
 
 use crate::cluster::{self, ClusterError, ClusterParams, Clustering, Points, Selection};
 use crate::data::features::with_neighbors;
+use crate::data::screen::{self, Screened, screen};
 use crate::data::symmetry::closure;
 use crate::data::visibility::MIN_SEEN_FRAMES;
 use crate::data::{ImageSize, Kind, Normalization, PointSet, Symmetry, Visibility};
@@ -56,8 +57,9 @@ pub enum FitError {
         found: usize,
     },
     #[error(
-        "k = {k} is more than the {read} points model {model} reads from these {n}: it thins a \
-         set denser than its training data before reading it"
+        "k = {k} is more than the {read} points model {model} reads from these {n}: it reads \
+         each repeated point once, sets apart points far from the rest, and thins a set denser \
+         than its training data before reading it"
     )]
     KAboveRead {
         model: String,
@@ -209,43 +211,64 @@ struct ReadPlan {
     thinned: Option<(Vec<usize>, Vec<usize>)>,
     /// Whether the card's network for sparse sets reads it.
     sparse: bool,
+    /// The rows set apart as far from the rest ([`screen`]).
+    far: Vec<usize>,
 }
 
-/// Stage 1: how the model reads the set ([`density::reading`]) for cards that record their
-/// training spacing (else whole, by the card's networks): a set denser than training at a seeded
-/// subset, one sparser than the card's sparse network's threshold by that network. `read` is the
-/// set at the model's frames.
+/// Stage 1: how the model reads the set. No row far from the rest, and, for a network that
+/// reads neighbourhoods, each distinct row once ([`screen`]: both give the network a picture it
+/// was never trained on); then, for cards that
+/// record their training spacing ([`density::reading`]), a set denser than training at a seeded
+/// subset, one sparser than the card's sparse network's threshold by that network. Rows not
+/// read take their nearest read row's embedding. `whole` is the set as sent (rows compared over
+/// every frame), `read` the same rows at the model's frames.
 fn read_plan(
     model: &LoadedModel,
+    whole: &PointSet,
     read: &PointSet,
     image: Option<ImageSize>,
     seed: u64,
-) -> ReadPlan {
+) -> Result<ReadPlan, FitError> {
     let card = &model.card;
-    let whole = ReadPlan {
-        thinned: None,
-        sparse: false,
+    let neighbourhoods = card.architecture.neighbors > 0 || card.architecture.graph_neighbors > 0;
+    let Screened { read: kept, far } = screen(whole, neighbourhoods);
+    let subset = match &kept {
+        Some(rows) => Cow::Owned(
+            read.select(rows)
+                .map_err(|e| FitError::Input(e.to_string()))?,
+        ),
+        None => Cow::Borrowed(read),
     };
-    let Some(trained) = card.spacing else {
-        return whole;
-    };
-    let normalised = card.normalization.apply(read, image);
-    let k = card.architecture.neighbors;
-    let above = card.sparse.as_ref().map(|s| s.above);
-    match density::reading(&normalised, read.dim(), k, trained, above, seed) {
-        density::Reading::Whole => whole,
-        density::Reading::Sparse => ReadPlan {
-            thinned: None,
-            sparse: true,
-        },
-        density::Reading::Thinned(rows) => {
-            let owner = density::nearest_read(&normalised, read.dim(), &rows);
-            ReadPlan {
-                thinned: Some((rows, owner)),
-                sparse: false,
-            }
+    let reading = match card.spacing {
+        Some(trained) => {
+            let normalised = card.normalization.apply(&subset, image);
+            let k = card.architecture.neighbors;
+            let above = card.sparse.as_ref().map(|s| s.above);
+            density::reading(&normalised, read.dim(), k, trained, above, seed)
         }
-    }
+        None => density::Reading::Whole,
+    };
+    let (rows, sparse) = match reading {
+        density::Reading::Whole => (kept, false),
+        density::Reading::Sparse => (kept, true),
+        density::Reading::Thinned(rows) => {
+            let rows = match &kept {
+                Some(kept) => rows.into_iter().map(|r| kept[r]).collect(),
+                None => rows,
+            };
+            (Some(rows), false)
+        }
+    };
+    let thinned = rows.map(|rows| {
+        let normalised = card.normalization.apply(read, image);
+        let owner = density::nearest_read(&normalised, read.dim(), &rows);
+        (rows, owner)
+    });
+    Ok(ReadPlan {
+        thinned,
+        sparse,
+        far,
+    })
 }
 
 /// The embeddings of a set: one row per point read.
@@ -257,6 +280,8 @@ pub struct Embedding {
     /// For each input row, its row in `values` (its own, or its nearest read point's); `None`
     /// when every row was read (m = n).
     pub owner: Option<Vec<usize>>,
+    /// The input rows not read for lying far from the rest ([`screen`]), ascending.
+    pub far: Vec<usize>,
 }
 
 impl Embedding {
@@ -293,7 +318,11 @@ pub fn embed(
     check(model, points)?;
     let (points, image) = in_first_frame(points, image);
     let mut windows = frames_read(model, &points);
-    let ReadPlan { thinned, sparse } = read_plan(model, &windows[0], image, seed);
+    let ReadPlan {
+        thinned,
+        sparse,
+        far,
+    } = read_plan(model, &points, &windows[0], image, seed)?;
     let (rows, owner) = thinned.unzip();
     // The windows side by side on the model's threads (each one's neighbour searches run on
     // one thread; its forward pass spreads over all of them).
@@ -312,6 +341,7 @@ pub fn embed(
         values,
         width,
         owner,
+        far,
     })
 }
 
@@ -393,11 +423,15 @@ pub fn cluster(
 }
 
 /// Stage 5: the learned clustering refined into explicit structures of the model's family,
-/// on `points` as the caller sent them.
+/// on `points` as the caller sent them. Rows `far` from the rest ([`Embedding::far`]) take no
+/// part: they would sway the fits of the groups they were clustered with (a normalisation that
+/// centres and scales a group's rows moves with them). They are answered −1 where outliers may
+/// be, else joined to the structure they are nearest.
 pub fn refine(
     model: &LoadedModel,
     points: &PointSet,
     clustering: &Clustering,
+    far: &[usize],
     params: &RefineParams,
 ) -> Refined {
     // A K the caller gave is kept; a chosen one may change within the K the choice considered.
@@ -405,15 +439,45 @@ pub fn refine(
         let considered = clustering.scores.iter().map(|s| s.0).max();
         considered.unwrap_or(clustering.k).max(clustering.k)
     });
-    refine::refine_on(
-        points,
-        &clustering.labels,
-        clustering.k,
-        model.card.family(),
-        params,
-        k_chosen,
-        model.pool(),
-    )
+    let on = |points: &PointSet, labels: &[usize]| {
+        refine::refine_on(
+            points,
+            labels,
+            clustering.k,
+            model.card.family(),
+            params,
+            k_chosen,
+            model.pool(),
+        )
+    };
+    if far.is_empty() {
+        return on(points, &clustering.labels);
+    }
+    // Every group keeps rows: a far row takes the label of its nearest read row.
+    let near: Vec<usize> = (0..points.len())
+        .filter(|i| far.binary_search(i).is_err())
+        .collect();
+    let Ok(kept) = points.select(&near) else {
+        return on(points, &clustering.labels);
+    };
+    let labels: Vec<usize> = near.iter().map(|&i| clustering.labels[i]).collect();
+    let mut refined = on(&kept, &labels);
+    let mut all = vec![-1; points.len()];
+    for (&i, &l) in near.iter().zip(&refined.labels) {
+        all[i] = l;
+    }
+    if !params.outliers {
+        for &i in far {
+            let nearest = refined
+                .structures
+                .iter()
+                .map(|s| (s.model.residual(points.row(i)), s.label as i64))
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            all[i] = nearest.map_or(-1, |(_, l)| l);
+        }
+    }
+    refined.labels = all;
+    refined
 }
 
 /// Stage 5 with K chosen automatically: the clustering refined, and the k + 1 clustering
@@ -440,12 +504,15 @@ pub fn refine_chosen(
         || model.card.family() == geometry::Family::Subspace
         || k + 1 > considered.min(read)
     {
-        return Ok((clustering.clone(), refine(model, points, clustering, r)));
+        return Ok((
+            clustering.clone(),
+            refine(model, points, clustering, &embedding.far, r),
+        ));
     }
     let wider = one_more_group(model, embedding, params, clustering)?;
     let (refined, again) = model.pool().join(
-        || refine(model, points, clustering, r),
-        || refine(model, points, &wider, r),
+        || refine(model, points, clustering, &embedding.far, r),
+        || refine(model, points, &wider, &embedding.far, r),
     );
     if !refine::splits_pooled(&refined, &again, points.len()) {
         return Ok((clustering.clone(), refined));
@@ -456,7 +523,7 @@ pub fn refine_chosen(
             return Ok(None);
         }
         let next = one_more_group(model, embedding, params, from)?;
-        let answer = refine(model, points, &next, r);
+        let answer = refine(model, points, &next, &embedding.far, r);
         Ok(Some((both_ks(from, next), answer)))
     })
 }
@@ -500,7 +567,7 @@ fn fit_sent(
 ) -> Result<FitOutcome, FitError> {
     let as_sent = || {
         let mut outcome = fit_counting(model, points, image, options, "points")?;
-        outcome.warnings.extend(image_barely_used(points, image));
+        outcome.warnings.extend(image_warnings(points, image));
         outcome
             .warnings
             .extend(lost_marks(points).filter(|_| !masked));
@@ -523,7 +590,7 @@ fn fit_sent(
         s.model = s.model.second_view_unmoved(scale, shift);
     }
     // Each image's span, in its own pixels.
-    outcome.warnings.extend(image_barely_used(points, image));
+    outcome.warnings.extend(image_warnings(points, image));
     Ok(outcome)
 }
 
@@ -589,11 +656,15 @@ fn fit_counting(
                     let ((mut refined, again), other) = pool.join(
                         || {
                             pool.join(
-                                || refine(model, points, &clustering, r),
-                                || wider.as_ref().map(|w| refine(model, points, w, r)),
+                                || refine(model, points, &clustering, &embedding.far, r),
+                                || {
+                                    wider
+                                        .as_ref()
+                                        .map(|w| refine(model, points, w, &embedding.far, r))
+                                },
                             )
                         },
-                        || refine(model, points, &chosen, r),
+                        || refine(model, points, &chosen, &embedding.far, r),
                     );
                     // Refinement dissolves the outlier group into -1 labels, so the k + 1
                     // clustering is refined too, and its answer is kept when it has no more
@@ -666,6 +737,7 @@ fn fit_counting(
     if let Selection::Fixed(asked) = params.selection() {
         warnings.extend(fewer_than_asked(asked, k, refine_params.is_some()));
     }
+    warnings.extend(far_apart(&embedding.far, rows));
     if let Some((from, noise, given_noise)) = replaced {
         warnings.push(format!(
             "the {k} structures answered were refined from the clustering into {from} groups \
@@ -728,9 +800,7 @@ pub fn fit_seen(
         options,
         "tracks seen in every frame",
     )?;
-    outcome
-        .warnings
-        .extend(image_barely_used(&throughout, image));
+    outcome.warnings.extend(image_warnings(&throughout, image));
     let t0 = Instant::now();
     let motions = motions(&throughout, &outcome);
     let placing = Placing {
@@ -1325,6 +1395,46 @@ fn image_barely_used(points: &PointSet, image: Option<ImageSize>) -> Option<Stri
     })
 }
 
+/// The warnings of pixel coordinates that do not fit the `image` given: spanning a corner of it
+/// ([`image_barely_used`]), or lying outside it ([`outside_image`]).
+fn image_warnings(points: &PointSet, image: Option<ImageSize>) -> impl Iterator<Item = String> {
+    image_barely_used(points, image)
+        .into_iter()
+        .chain(outside_image(points, image))
+}
+
+/// A position outside the image by more than this share of its width or height counts as
+/// outside it (tracks and matches may run a little past the border).
+const OUTSIDE_MARGIN: f64 = 0.1;
+/// The share of positions outside the image past which a fit says so.
+const OUTSIDE_SHARE: f64 = 0.05;
+
+/// The warning of pixel coordinates outside the `image` given ([`OUTSIDE_MARGIN`]), for more
+/// than [`OUTSIDE_SHARE`] of the positions (each view of a correspondence against its own
+/// image): an image_size in other units than the points, or swapped. `None` for points2d, no
+/// image, or a few such positions.
+fn outside_image(points: &PointSet, image: Option<ImageSize>) -> Option<String> {
+    let image = image.filter(|_| points.kind() != Kind::Points2d)?;
+    let two_views = points.kind() == Kind::Correspondences;
+    let (mut outside, mut total) = (0usize, 0usize);
+    for i in 0..points.len() {
+        for (j, p) in points.row(i).chunks_exact(2).enumerate() {
+            let [w, h] = image.view(if two_views { j } else { 0 });
+            let off =
+                |x: f64, side: f64| x < -OUTSIDE_MARGIN * side || x > (1.0 + OUTSIDE_MARGIN) * side;
+            total += 1;
+            outside += usize::from(off(p[0], w) || off(p[1], h));
+        }
+    }
+    (outside as f64 > OUTSIDE_SHARE * total as f64).then(|| {
+        format!(
+            "{outside} of the {total} positions lie outside the image_size given: check that it \
+             is the size of the image the coordinates were measured in, in the same units, width \
+             first"
+        )
+    })
+}
+
 /// The warning of track positions at exactly (0, 0), what many trackers write for a point
 /// they lost: read as positions, they pull their tracks to the image corner. `None` for other
 /// kinds, or when there are none.
@@ -1343,6 +1453,25 @@ fn lost_marks(points: &PointSet) -> Option<String> {
              visible (one row of 0/1 flags per track, 0 where it was not seen) so that they are \
              not read as positions",
             if zeros == 1 { " is" } else { "s are" }
+        )
+    })
+}
+
+/// The warning for rows the network did not read for lying far from the rest
+/// ([`crate::data::screen`]), naming the first few (0-based, among the fit's `rows`).
+fn far_apart(far: &[usize], rows: &str) -> Option<String> {
+    const NAMED: usize = 10;
+    let (count, named) = (far.len(), far.iter().take(NAMED));
+    (count > 0).then(|| {
+        let list = named.map(|i| i.to_string()).collect::<Vec<_>>().join(", ");
+        format!(
+            "{count} of the {rows} lie{} far from the rest (more than {} times the spread of \
+             the {rows} nearer the centre), so the network did not read {}: {}{list}{}",
+            if count == 1 { "s" } else { "" },
+            screen::FAR_SPREADS,
+            if count == 1 { "it" } else { "them" },
+            if count == 1 { "row " } else { "rows " },
+            if count > NAMED { ", ..." } else { "" },
         )
     })
 }
@@ -1473,6 +1602,29 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn points_outside_the_image_say_so() {
+        // x from 0 to 38, y from 1 to 39: inside a 40 x 40 image, outside a 20 x 20 one by far.
+        let values: Vec<f64> = (0..40).map(f64::from).collect();
+        let pairs = PointSet::from_flat(Kind::Correspondences, 4, values.clone()).unwrap();
+        let image = |w, h| Some(ImageSize::new(w, h).unwrap());
+        assert_eq!(outside_image(&pairs, None), None);
+        assert_eq!(outside_image(&pairs, image(40.0, 40.0)), None);
+        // Within a tenth of the size past the border is inside: 36 x 36 holds up to 39.6.
+        assert_eq!(outside_image(&pairs, image(36.0, 36.0)), None);
+        let w = outside_image(&pairs, image(20.0, 20.0)).unwrap();
+        assert!(w.starts_with("9 of the 20 positions lie outside"), "{w}");
+        // Each view against its own image: the second view (x 2..38) fits 40 x 40.
+        let two = Some(ImageSize::per_view([20.0, 20.0], [40.0, 40.0]).unwrap());
+        let w = outside_image(&pairs, two).unwrap();
+        assert!(w.starts_with("4 of the 20 positions lie outside"), "{w}");
+        // Tracks: every frame in the one image; curves have no image.
+        let tracks = PointSet::from_flat(Kind::Trajectories, 4, values.clone()).unwrap();
+        assert!(outside_image(&tracks, image(20.0, 20.0)).is_some());
+        let curve = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
+        assert_eq!(outside_image(&curve, image(20.0, 20.0)), None);
+    }
+
+    #[test]
     fn points_in_a_corner_of_the_image_say_so() {
         // x from 0 to 38, y from 1 to 39.
         let values: Vec<f64> = (0..40).map(f64::from).collect();
@@ -1500,7 +1652,7 @@ pub(crate) mod tests {
             "{w}"
         );
         // Curves have no image.
-        let curve = PointSet::from_flat(Kind::Points2d, 2, values).unwrap();
+        let curve = PointSet::from_flat(Kind::Points2d, 2, values.clone()).unwrap();
         assert_eq!(lost_marks(&curve), None);
         assert_eq!(image_barely_used(&curve, image(4000.0, 3000.0)), None);
     }

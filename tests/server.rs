@@ -686,6 +686,48 @@ fn a_chosen_k_counts_the_structures_and_the_outliers_are_answered_apart() {
 }
 
 #[test]
+fn repeated_rows_and_a_far_point_leave_the_answer_as_it_was() {
+    let server = Server::start(&[]);
+    let s = LceGenerator::new(11, LceConfig::default())
+        .sample(LceVariant::Mixed, "t")
+        .sample;
+    let rows: Vec<Vec<f64>> = (0..s.points.len())
+        .map(|i| s.points.row(i).to_vec())
+        .collect();
+    let n = rows.len();
+    let fit = |points: &[Vec<f64>]| {
+        let r = server.post_json("/v1/fit", &json!({"kind": "points2d", "points": points}));
+        assert_eq!(r.status, 200, "{}", r.text());
+        let v = r.json();
+        check_fit(&v, points.len());
+        v
+    };
+    let once = fit(&rows);
+    // Sent twice: each copy answered as the set sent once (the network reads each row once;
+    // refinement weighs both copies, which may move a point at the margin).
+    let twice = fit(&[rows.clone(), rows.clone()].concat());
+    let both = labels(&twice);
+    let (a, b) = both.split_at(n);
+    assert_eq!(a, b, "both copies of a row answer alike");
+    assert_eq!(twice["k"], once["k"]);
+    assert!(error_rate(&labels(&once), a) <= 0.02);
+    // One point far from the rest: set apart, answered -1 and named; the rest as before.
+    for far in [vec![40.0, -40.0], vec![1e9, 1e9]] {
+        let mut with = rows.clone();
+        with.push(far.clone());
+        let v = fit(&with);
+        let all = labels(&v);
+        assert_eq!(error_rate(&labels(&once), &all[..n]), 0.0, "{far:?}");
+        assert_eq!(v["labels"][n], -1, "{far:?}");
+        let warnings = v["warnings"].to_string();
+        assert!(
+            warnings.contains("far from the rest") && warnings.contains("row 200"),
+            "{warnings}"
+        );
+    }
+}
+
+#[test]
 fn fits_a_generated_lce_sample_invariant_to_scale() {
     let server = Server::start(&[]);
     let s = LceGenerator::new(11, LceConfig::default())

@@ -72,7 +72,7 @@ error_codes! {
     InvalidClustering = "invalid_clustering", UNPROCESSABLE_ENTITY,
         "The clustering parameters are inconsistent.";
     InvalidK = "invalid_k", UNPROCESSABLE_ENTITY,
-        "k outside 1..=N (the number of points, or those the model reads of a thinned set), or k_max outside 1..=--max-k-max.";
+        "k outside 1..=N (the number of points, or those the model reads: repeated points once, far points set apart, a dense set thinned), or k_max outside 1..=--max-k-max.";
     InvalidSelection = "invalid_selection", UNPROCESSABLE_ENTITY,
         "selection is neither sod nor silhouette.";
     UnknownKind = "unknown_kind", UNPROCESSABLE_ENTITY,

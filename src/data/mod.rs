@@ -7,6 +7,7 @@ pub mod frames;
 pub mod motion;
 pub mod points;
 pub mod ranges;
+pub mod screen;
 pub mod symmetry;
 pub mod synthetic;
 pub mod twoview;
