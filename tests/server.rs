@@ -685,15 +685,20 @@ fn a_chosen_k_counts_the_structures_and_the_outliers_are_answered_apart() {
     }
 }
 
+/// The rows of a generated mixed LCE sample (1 line, 2 ellipses, 1 circle, 50 points each).
+fn lce_rows(seed: u64) -> Vec<Vec<f64>> {
+    let s = LceGenerator::new(seed, LceConfig::default())
+        .sample(LceVariant::Mixed, "t")
+        .sample;
+    (0..s.points.len())
+        .map(|i| s.points.row(i).to_vec())
+        .collect()
+}
+
 #[test]
 fn repeated_rows_and_a_far_point_leave_the_answer_as_it_was() {
     let server = Server::start(&[]);
-    let s = LceGenerator::new(11, LceConfig::default())
-        .sample(LceVariant::Mixed, "t")
-        .sample;
-    let rows: Vec<Vec<f64>> = (0..s.points.len())
-        .map(|i| s.points.row(i).to_vec())
-        .collect();
+    let rows = lce_rows(11);
     let n = rows.len();
     let fit = |points: &[Vec<f64>]| {
         let r = server.post_json("/v1/fit", &json!({"kind": "points2d", "points": points}));
@@ -730,12 +735,7 @@ fn repeated_rows_and_a_far_point_leave_the_answer_as_it_was() {
 #[test]
 fn fits_a_generated_lce_sample_invariant_to_scale() {
     let server = Server::start(&[]);
-    let s = LceGenerator::new(11, LceConfig::default())
-        .sample(LceVariant::Mixed, "t")
-        .sample;
-    let rows: Vec<Vec<f64>> = (0..s.points.len())
-        .map(|i| s.points.row(i).to_vec())
-        .collect();
+    let rows = lce_rows(11);
     let r = server.post_json(
         "/v1/fit",
         &json!({"kind": "points2d", "points": rows, "k": 4}),
