@@ -54,9 +54,44 @@ pub struct Homography {
 }
 
 impl Homography {
-    /// `None` when `h` is singular or not finite.
+    /// `None` when `h` is singular or not finite. The test is the same at any image size: `h`
+    /// is inverted as D·h·D⁻¹ with D = diag(1, 1, c), which has h's determinant, its
+    /// translation column divided by c and its perspective row multiplied by c, for a power of
+    /// two c that brings the translations to the size of the linear part. In pixels those
+    /// entries grow with the image side and its perspective ones shrink, so without it a plane
+    /// seen in a 4000-pixel image counted as singular where the same plane at 640 pixels did
+    /// not. Scaling by powers of two is exact: the inverse is the same to the last bit.
     pub fn new(h: Mat3) -> Option<Self> {
-        let inv = mat3_inverse(&h)?;
+        let translation = h[2].abs().max(h[5].abs());
+        let linear = h[0].abs().max(h[1].abs()).max(h[3].abs()).max(h[4].abs());
+        let c = if translation > 0.0 && linear > 0.0 && (translation / linear).is_finite() {
+            (translation / linear).log2().round().exp2()
+        } else {
+            1.0
+        };
+        let balanced = [
+            h[0],
+            h[1],
+            h[2] / c,
+            h[3],
+            h[4],
+            h[5] / c,
+            h[6] * c,
+            h[7] * c,
+            h[8],
+        ];
+        let b = mat3_inverse(&balanced)?;
+        let inv = [
+            b[0],
+            b[1],
+            b[2] * c,
+            b[3],
+            b[4],
+            b[5] * c,
+            b[6] / c,
+            b[7] / c,
+            b[8],
+        ];
         Some(Self { h, inv })
     }
 }
@@ -446,6 +481,74 @@ pub(super) mod tests {
         }
         let kinv = mat3_inverse(k).unwrap();
         mul(&mul(k, &m), &kinv)
+    }
+
+    #[test]
+    fn a_homography_is_invertible_at_any_image_size() {
+        // A strongly foreshortening but invertible map in normalised units (it squashes y by
+        // 1e-6; det ≈ 1e-6), carried into pixels of images 1 to 4096 units wide:
+        // H_s = S·H·S⁻¹ with S = diag(s, s, 1).
+        let h: Mat3 = [1.0, 0.0, 0.3, 0.0, 1e-6, 0.2, 0.05, 0.0, 1.0];
+        let at = |s: f64| -> Mat3 {
+            [
+                h[0],
+                h[1],
+                h[2] * s,
+                h[3],
+                h[4],
+                h[5] * s,
+                h[6] / s,
+                h[7] / s,
+                h[8],
+            ]
+        };
+        let inv1 = Homography::new(h).expect("invertible").inv;
+        for s in [1.0, 640.0, 4000.0, 4096.0] {
+            let hs = at(s);
+            let g = Homography::new(hs)
+                .unwrap_or_else(|| panic!("singular at {s}"))
+                .inv;
+            // The inverse carried back: S⁻¹·H_s⁻¹·S = H⁻¹.
+            let back = [
+                g[0],
+                g[1],
+                g[2] / s,
+                g[3],
+                g[4],
+                g[5] / s,
+                g[6] * s,
+                g[7] * s,
+                g[8],
+            ];
+            for (a, b) in back.iter().zip(&inv1) {
+                assert!(
+                    (a - b).abs() <= 1e-9 * b.abs().max(1.0),
+                    "{s}: {back:?} against {inv1:?}"
+                );
+            }
+            // Where the plain test passes too, the inverse is the same to the last bit.
+            if let Some(plain) = mat3_inverse(&hs) {
+                assert_eq!(plain, g, "{s}");
+            }
+        }
+        // Singular stays singular: a rank-2 map at any size.
+        let rank2: Mat3 = [1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.1, 0.0, 1.0];
+        for s in [1.0, 4096.0] {
+            let r = [
+                rank2[0],
+                rank2[1],
+                rank2[2] * s,
+                rank2[3],
+                rank2[4],
+                rank2[5] * s,
+                rank2[6] / s,
+                rank2[7] / s,
+                rank2[8],
+            ];
+            assert!(Homography::new(r).is_none(), "{s}");
+        }
+        // Before, the plain test failed it in pixels of a 4096-unit image.
+        assert!(mat3_inverse(&at(4096.0)).is_none());
     }
 
     /// A plane seen by two cameras: `n` correspondences spread over the 640 × 480 image 1,
