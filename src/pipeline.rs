@@ -566,7 +566,7 @@ fn fit_sent(
     masked: bool,
 ) -> Result<FitOutcome, FitError> {
     let as_sent = || {
-        let mut outcome = fit_counting(model, points, image, options, "points")?;
+        let mut outcome = fit_counting(model, points, image, options, "points", None)?;
         outcome.warnings.extend(image_warnings(points, image));
         outcome
             .warnings
@@ -585,7 +585,7 @@ fn fit_sent(
     else {
         return as_sent();
     };
-    let mut outcome = fit_counting(model, &moved, Some(first), options, "points")?;
+    let mut outcome = fit_counting(model, &moved, Some(first), options, "points", None)?;
     for s in &mut outcome.structures {
         s.model = s.model.second_view_unmoved(scale, shift);
     }
@@ -595,13 +595,14 @@ fn fit_sent(
 }
 
 /// [`fit`], its warnings naming the rows of `points` as `rows` ("points", or the tracks seen
-/// in every frame of a partly seen set).
+/// in every frame of a partly seen set), row i being the caller's row `row_of[i]` (else i).
 fn fit_counting(
     model: &LoadedModel,
     points: &PointSet,
     image: Option<ImageSize>,
     options: &FitOptions,
     rows: &'static str,
+    row_of: Option<&[usize]>,
 ) -> Result<FitOutcome, FitError> {
     let FitOptions {
         params,
@@ -737,7 +738,11 @@ fn fit_counting(
     if let Selection::Fixed(asked) = params.selection() {
         warnings.extend(fewer_than_asked(asked, k, refine_params.is_some()));
     }
-    warnings.extend(far_apart(&embedding.far, rows));
+    let far: Vec<usize> = match row_of {
+        Some(row_of) => embedding.far.iter().map(|&i| row_of[i]).collect(),
+        None => embedding.far.clone(),
+    };
+    warnings.extend(far_apart(&far, rows));
     if let Some((from, noise, given_noise)) = replaced {
         warnings.push(format!(
             "the {k} structures answered were refined from the clustering into {from} groups \
@@ -799,6 +804,7 @@ pub fn fit_seen(
         image,
         options,
         "tracks seen in every frame",
+        Some(&complete),
     )?;
     outcome.warnings.extend(image_warnings(&throughout, image));
     let t0 = Instant::now();
@@ -1458,7 +1464,7 @@ fn lost_marks(points: &PointSet) -> Option<String> {
 }
 
 /// The warning for rows the network did not read for lying far from the rest
-/// ([`crate::data::screen`]), naming the first few (0-based, among the fit's `rows`).
+/// ([`crate::data::screen`]), naming the first few by the caller's 0-based row numbers.
 fn far_apart(far: &[usize], rows: &str) -> Option<String> {
     const NAMED: usize = 10;
     let (count, named) = (far.len(), far.iter().take(NAMED));
@@ -1938,6 +1944,48 @@ pub(crate) mod tests {
     /// Through the pipeline: the tracks seen throughout are fitted alone (the same labels as
     /// fitting them by themselves), the others take a structure's label or −1 with a warning,
     /// and the structures count every track labelled with them.
+    #[test]
+    fn a_far_track_is_named_by_the_callers_row_among_partly_seen_tracks() {
+        // 24 tracks of two motions seen throughout, one seen in 3 of 4 frames (row 1), and a
+        // track far from all of them (row 26), seen throughout: the subset read is rows 0 and
+        // 2..=26, where the far track is row 25; the warning names the caller's row.
+        let track = |i: usize| -> Vec<f64> {
+            let (x, y, m) = ((i * 7 % 11) as f64 - 5.0, (i * 5 % 13) as f64 - 6.0, i % 2);
+            (0..4)
+                .flat_map(|f| {
+                    let t = f as f64 * [3.0, -2.0][m];
+                    [x + t + 32.0, y - t + 32.0]
+                })
+                .collect()
+        };
+        let mut rows: Vec<Vec<f64>> = (0..26).map(track).collect();
+        rows.push(vec![9e4; 8]);
+        let mut seen = vec![vec![true; 4]; 27];
+        seen[1][2] = false;
+        let points = PointSet::from_rows(Kind::Trajectories, &rows).unwrap();
+        let visibility = Visibility::new(&seen, 27, 4).unwrap();
+        let model = tiny(vec![]);
+        let params = ClusterParams::builder()
+            .selection(Selection::Fixed(2))
+            .build()
+            .unwrap();
+        let options = FitOptions {
+            params: &params,
+            symmetries: &[],
+            refine: None,
+            outlier_group: false,
+        };
+        let image = Some(ImageSize::new(64.0, 64.0).unwrap());
+        let out = fit_seen(&model, &points, &visibility, image, &options).unwrap();
+        let far: Vec<&String> = out.warnings.iter().filter(|w| w.contains("far")).collect();
+        assert_eq!(far.len(), 1, "{:?}", out.warnings);
+        assert!(
+            far[0].ends_with("so the network did not read it: row 26"),
+            "{}",
+            far[0]
+        );
+    }
+
     #[test]
     fn fits_of_partly_seen_tracks_fit_the_tracks_seen_throughout() {
         let model = tiny(vec![]);
