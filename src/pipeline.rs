@@ -1607,12 +1607,39 @@ pub(crate) mod tests {
         assert_eq!(lost_marks(&pairs), None);
     }
 
-    #[test]
-    fn points_outside_the_image_say_so() {
-        // x from 0 to 38, y from 1 to 39: inside a 40 x 40 image, outside a 20 x 20 one by far.
+    /// Clustering parameters with K given.
+    fn fixed(k: usize) -> ClusterParams {
+        ClusterParams::builder()
+            .selection(Selection::Fixed(k))
+            .build()
+            .unwrap()
+    }
+
+    /// A fit's options with `params`, no symmetries, no refinement.
+    fn unrefined(params: &ClusterParams) -> FitOptions<'_> {
+        FitOptions {
+            params,
+            symmetries: &[],
+            refine: None,
+            outlier_group: false,
+        }
+    }
+
+    /// The values 0 to 39, and ten correspondences of them: x from 0 to 38, y from 1 to 39.
+    fn forty_values() -> (Vec<f64>, PointSet) {
         let values: Vec<f64> = (0..40).map(f64::from).collect();
         let pairs = PointSet::from_flat(Kind::Correspondences, 4, values.clone()).unwrap();
-        let image = |w, h| Some(ImageSize::new(w, h).unwrap());
+        (values, pairs)
+    }
+
+    fn image(w: f64, h: f64) -> Option<ImageSize> {
+        Some(ImageSize::new(w, h).unwrap())
+    }
+
+    #[test]
+    fn points_outside_the_image_say_so() {
+        // Inside a 40 x 40 image, outside a 20 x 20 one by far.
+        let (values, pairs) = forty_values();
         assert_eq!(outside_image(&pairs, None), None);
         assert_eq!(outside_image(&pairs, image(40.0, 40.0)), None);
         // Within a tenth of the size past the border is inside: 36 x 36 holds up to 39.6.
@@ -1632,10 +1659,7 @@ pub(crate) mod tests {
 
     #[test]
     fn points_in_a_corner_of_the_image_say_so() {
-        // x from 0 to 38, y from 1 to 39.
-        let values: Vec<f64> = (0..40).map(f64::from).collect();
-        let pairs = PointSet::from_flat(Kind::Correspondences, 4, values.clone()).unwrap();
-        let image = |w, h| Some(ImageSize::new(w, h).unwrap());
+        let (values, pairs) = forty_values();
         assert_eq!(image_barely_used(&pairs, None), None);
         assert_eq!(image_barely_used(&pairs, image(380.0, 200.0)), None);
         let w = image_barely_used(&pairs, image(4000.0, 3000.0)).unwrap();
@@ -1965,18 +1989,9 @@ pub(crate) mod tests {
         let points = PointSet::from_rows(Kind::Trajectories, &rows).unwrap();
         let visibility = Visibility::new(&seen, 27, 4).unwrap();
         let model = tiny(vec![]);
-        let params = ClusterParams::builder()
-            .selection(Selection::Fixed(2))
-            .build()
-            .unwrap();
-        let options = FitOptions {
-            params: &params,
-            symmetries: &[],
-            refine: None,
-            outlier_group: false,
-        };
-        let image = Some(ImageSize::new(64.0, 64.0).unwrap());
-        let out = fit_seen(&model, &points, &visibility, image, &options).unwrap();
+        let params = fixed(2);
+        let options = unrefined(&params);
+        let out = fit_seen(&model, &points, &visibility, image(64.0, 64.0), &options).unwrap();
         let far: Vec<&String> = out.warnings.iter().filter(|w| w.contains("far")).collect();
         assert_eq!(far.len(), 1, "{:?}", out.warnings);
         assert!(
@@ -2145,17 +2160,8 @@ pub(crate) mod tests {
         let points = PointSet::from_flat(Kind::Trajectories, 4, values).unwrap();
         let image = Some(ImageSize::new(100.0, 100.0).unwrap());
         let at = |k: usize| {
-            let params = ClusterParams::builder()
-                .selection(Selection::Fixed(k))
-                .build()
-                .unwrap();
-            let options = FitOptions {
-                params: &params,
-                symmetries: &[],
-                refine: None,
-                outlier_group: false,
-            };
-            fit(&model, &points, image, &options)
+            let params = fixed(k);
+            fit(&model, &points, image, &unrefined(&params))
         };
         let read = at(2).unwrap().clustering.labels.len();
         assert_eq!(read, points.len(), "every point is answered");
