@@ -232,6 +232,13 @@ fn read_plan(
     let card = &model.card;
     let neighbourhoods = card.architecture.neighbors > 0 || card.architecture.graph_neighbors > 0;
     let Screened { read: kept, far } = screen(whole, neighbourhoods);
+    let Some(trained) = card.spacing else {
+        return Ok(ReadPlan {
+            thinned: kept.map(|rows| owned_by_nearest(model, read, image, rows)),
+            sparse: false,
+            far,
+        });
+    };
     let subset = match &kept {
         Some(rows) => Cow::Owned(
             read.select(rows)
@@ -239,15 +246,10 @@ fn read_plan(
         ),
         None => Cow::Borrowed(read),
     };
-    let reading = match card.spacing {
-        Some(trained) => {
-            let normalised = card.normalization.apply(&subset, image);
-            let k = card.architecture.neighbors;
-            let above = card.sparse.as_ref().map(|s| s.above);
-            density::reading(&normalised, read.dim(), k, trained, above, seed)
-        }
-        None => density::Reading::Whole,
-    };
+    let normalised = card.normalization.apply(&subset, image);
+    let k = card.architecture.neighbors;
+    let above = card.sparse.as_ref().map(|s| s.above);
+    let reading = density::reading(&normalised, read.dim(), k, trained, above, seed);
     let (rows, sparse) = match reading {
         density::Reading::Whole => (kept, false),
         density::Reading::Sparse => (kept, true),
@@ -259,16 +261,33 @@ fn read_plan(
             (Some(rows), false)
         }
     };
-    let thinned = rows.map(|rows| {
-        let normalised = card.normalization.apply(read, image);
-        let owner = density::nearest_read(&normalised, read.dim(), &rows);
-        (rows, owner)
+    // Every row in the frame the subset was read in: the same normalisation where every row is
+    // in the subset.
+    let thinned = rows.map(|rows| match subset {
+        Cow::Borrowed(_) => {
+            let owner = density::nearest_read(&normalised, read.dim(), &rows);
+            (rows, owner)
+        }
+        Cow::Owned(_) => owned_by_nearest(model, read, image, rows),
     });
     Ok(ReadPlan {
         thinned,
         sparse,
         far,
     })
+}
+
+/// The `rows` of `read` a model reads, and for every row of `read` its nearest read row (in
+/// the card's normalised frame, where a row read is its own).
+fn owned_by_nearest(
+    model: &LoadedModel,
+    read: &PointSet,
+    image: Option<ImageSize>,
+    rows: Vec<usize>,
+) -> (Vec<usize>, Vec<usize>) {
+    let normalised = model.card.normalization.apply(read, image);
+    let owner = density::nearest_read(&normalised, read.dim(), &rows);
+    (rows, owner)
 }
 
 /// The embeddings of a set: one row per point read.
@@ -1423,11 +1442,10 @@ fn outside_image(points: &PointSet, image: Option<ImageSize>) -> Option<String> 
     let image = image.filter(|_| points.kind() != Kind::Points2d)?;
     let two_views = points.kind() == Kind::Correspondences;
     let (mut outside, mut total) = (0usize, 0usize);
+    let off = |x: f64, side: f64| x < -OUTSIDE_MARGIN * side || x > (1.0 + OUTSIDE_MARGIN) * side;
     for i in 0..points.len() {
         for (j, p) in points.row(i).chunks_exact(2).enumerate() {
             let [w, h] = image.view(if two_views { j } else { 0 });
-            let off =
-                |x: f64, side: f64| x < -OUTSIDE_MARGIN * side || x > (1.0 + OUTSIDE_MARGIN) * side;
             total += 1;
             outside += usize::from(off(p[0], w) || off(p[1], h));
         }

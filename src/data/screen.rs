@@ -118,16 +118,14 @@ pub fn far_rows(points: &PointSet, among: &[usize]) -> Vec<usize> {
             *v.select_nth_unstable_by(mid, f64::total_cmp).1
         })
         .collect();
-    let centred = |i: usize| -> Vec<f64> {
-        points
-            .row(i)
-            .iter()
-            .zip(&median)
-            .map(|(x, o)| x - o)
-            .collect()
-    };
+    // Each row of `among` centred on the median, once: row p of `centred` is among[p].
+    let centred: Vec<f64> = among
+        .iter()
+        .flat_map(|&i| points.row(i).iter().zip(&median).map(|(x, o)| x - o))
+        .collect();
+    let row = |p: usize| &centred[p * d..(p + 1) * d];
     let norm2 = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>();
-    let mut order: Vec<(f64, usize)> = among.iter().map(|&i| (norm2(&centred(i)), i)).collect();
+    let mut order: Vec<(f64, usize)> = (0..m).map(|p| (norm2(row(p)), p)).collect();
     order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     // Sums over the rows nearer than the one tested (centred on the median).
     let (mut sum, mut sum_sq) = (vec![0.0; d], 0.0);
@@ -137,11 +135,11 @@ pub fn far_rows(points: &PointSet, among: &[usize]) -> Vec<usize> {
         }
         *sum_sq += norm2(v);
     };
-    for &(_, i) in &order[..m - most] {
-        add(&centred(i), &mut sum, &mut sum_sq);
+    for &(_, p) in &order[..m - most] {
+        add(row(p), &mut sum, &mut sum_sq);
     }
     for j in m - most..m {
-        let v = centred(order[j].1);
+        let v = row(order[j].1);
         let nearer = j as f64;
         let c: Vec<f64> = sum.iter().map(|s| s / nearer).collect();
         let spread2 = (sum_sq / nearer - norm2(&c)).max(0.0);
@@ -149,19 +147,21 @@ pub fn far_rows(points: &PointSet, among: &[usize]) -> Vec<usize> {
         let apart = || {
             let nearest2 = order[..j]
                 .iter()
-                .map(|&(_, k)| {
-                    let w = centred(k);
-                    v.iter().zip(&w).map(|(x, y)| (x - y).powi(2)).sum::<f64>()
+                .map(|&(_, q)| {
+                    v.iter()
+                        .zip(row(q))
+                        .map(|(x, y)| (x - y).powi(2))
+                        .sum::<f64>()
                 })
                 .fold(f64::INFINITY, f64::min);
             nearest2 > FAR_GAP * FAR_GAP * spread2
         };
         if spread2 > 0.0 && gap2 > FAR_SPREADS * FAR_SPREADS * spread2 && apart() {
-            let mut far: Vec<usize> = order[j..].iter().map(|&(_, i)| i).collect();
+            let mut far: Vec<usize> = order[j..].iter().map(|&(_, p)| among[p]).collect();
             far.sort_unstable();
             return far;
         }
-        add(&v, &mut sum, &mut sum_sq);
+        add(v, &mut sum, &mut sum_sq);
     }
     Vec::new()
 }

@@ -69,31 +69,26 @@ impl Homography {
         } else {
             1.0
         };
-        let balanced = [
-            h[0],
-            h[1],
-            h[2] / c,
-            h[3],
-            h[4],
-            h[5] / c,
-            h[6] * c,
-            h[7] * c,
-            h[8],
-        ];
-        let b = mat3_inverse(&balanced)?;
-        let inv = [
-            b[0],
-            b[1],
-            b[2] * c,
-            b[3],
-            b[4],
-            b[5] * c,
-            b[6] / c,
-            b[7] / c,
-            b[8],
-        ];
+        let b = mat3_inverse(&projective_scaled(&h, c))?;
+        let inv = projective_scaled(&b, 1.0 / c);
         Some(Self { h, inv })
     }
+}
+
+/// D·h·D⁻¹ with D = diag(1, 1, c): the translation column divided by c, the perspective row
+/// multiplied by c, the rest as it is (the map in units c times larger, up to scale).
+fn projective_scaled(h: &Mat3, c: f64) -> Mat3 {
+    [
+        h[0],
+        h[1],
+        h[2] / c,
+        h[3],
+        h[4],
+        h[5] / c,
+        h[6] * c,
+        h[7] * c,
+        h[8],
+    ]
 }
 
 /// The image of (x, y) under H, or `None` at infinity.
@@ -489,19 +484,7 @@ pub(super) mod tests {
         // 1e-6; det ≈ 1e-6), carried into pixels of images 1 to 4096 units wide:
         // H_s = S·H·S⁻¹ with S = diag(s, s, 1).
         let h: Mat3 = [1.0, 0.0, 0.3, 0.0, 1e-6, 0.2, 0.05, 0.0, 1.0];
-        let at = |s: f64| -> Mat3 {
-            [
-                h[0],
-                h[1],
-                h[2] * s,
-                h[3],
-                h[4],
-                h[5] * s,
-                h[6] / s,
-                h[7] / s,
-                h[8],
-            ]
-        };
+        let at = |s: f64| projective_scaled(&h, 1.0 / s);
         let inv1 = Homography::new(h).expect("invertible").inv;
         for s in [1.0, 640.0, 4000.0, 4096.0] {
             let hs = at(s);
@@ -509,17 +492,7 @@ pub(super) mod tests {
                 .unwrap_or_else(|| panic!("singular at {s}"))
                 .inv;
             // The inverse carried back: S⁻¹·H_s⁻¹·S = H⁻¹.
-            let back = [
-                g[0],
-                g[1],
-                g[2] / s,
-                g[3],
-                g[4],
-                g[5] / s,
-                g[6] * s,
-                g[7] * s,
-                g[8],
-            ];
+            let back = projective_scaled(&g, s);
             for (a, b) in back.iter().zip(&inv1) {
                 assert!(
                     (a - b).abs() <= 1e-9 * b.abs().max(1.0),
@@ -534,18 +507,10 @@ pub(super) mod tests {
         // Singular stays singular: a rank-2 map at any size.
         let rank2: Mat3 = [1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.1, 0.0, 1.0];
         for s in [1.0, 4096.0] {
-            let r = [
-                rank2[0],
-                rank2[1],
-                rank2[2] * s,
-                rank2[3],
-                rank2[4],
-                rank2[5] * s,
-                rank2[6] / s,
-                rank2[7] / s,
-                rank2[8],
-            ];
-            assert!(Homography::new(r).is_none(), "{s}");
+            assert!(
+                Homography::new(projective_scaled(&rank2, 1.0 / s)).is_none(),
+                "{s}"
+            );
         }
         // Before, the plain test failed it in pixels of a 4096-unit image.
         assert!(mat3_inverse(&at(4096.0)).is_none());
