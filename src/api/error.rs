@@ -332,16 +332,7 @@ pub fn parse_json<T: RequestBody>(bytes: &[u8]) -> Result<T, ApiError> {
         if bytes.iter().find(|b| !b.is_ascii_whitespace()) != Some(&b'{') {
             return ApiError::not_an_object_like("the body", T::EXAMPLE);
         }
-        // A whole number past u64 is read as a float: say what went wrong with it.
-        let hint = if message.contains("invalid type: floating point")
-            && (message.contains("expected usize") || message.contains("expected u64"))
-        {
-            " (a whole number is expected here; this one has a fraction or an exponent, or is \
-             too large)"
-        } else {
-            ""
-        };
-        ApiError::new(ErrorCode::InvalidRequest, format!("{message}{hint}"))
+        ApiError::new(ErrorCode::InvalidRequest, message)
     })
 }
 

@@ -763,7 +763,8 @@ async fn a_nan_in_the_body_is_named_as_not_json() {
     }
 }
 
-/// A whole number the API takes (k, seed) sent too large or with a fraction is named as such.
+/// A whole number the API takes (k, k_max, seed) sent too large, negative or with a fraction is
+/// named as such; written as a float without a fraction (`4.0`) it is taken.
 #[tokio::test]
 async fn a_number_that_is_not_a_whole_number_in_range_is_named() {
     let state = state(1, 4, Duration::from_secs(60));
@@ -772,6 +773,9 @@ async fn a_number_that_is_not_a_whole_number_in_range_is_named() {
         ("k", "1000000000000000000000000000000", true),
         ("seed", "18446744073709551616", true),
         ("k", "2.5", true),
+        ("k", "-1", true),
+        ("k_max", "1e30", true),
+        ("seed", "-3.0", true),
         ("k", "\"two\"", false),
     ] {
         let body =
@@ -790,6 +794,22 @@ async fn a_number_that_is_not_a_whole_number_in_range_is_named() {
             "{message}"
         );
     }
+    // A client that holds every number as a float (JavaScript, numpy) sends 2.0 for 2.
+    let points: Vec<[f64; 2]> = (0..12)
+        .map(|i| [f64::from(i % 4), f64::from(i / 4)])
+        .collect();
+    let mut answers = Vec::new();
+    for (k, seed) in [(json!(2), json!(7)), (json!(2.0), json!(7.0))] {
+        let body = json!({"kind": "points2d", "points": points, "k": k, "seed": seed});
+        let (status, _, answer) = send(&app, post(&body)).await;
+        assert_eq!(status, StatusCode::OK, "k {k}: {answer}");
+        assert_eq!(answer["k"], json!(2), "{answer}");
+        answers.push(answer["labels"].clone());
+    }
+    assert_eq!(answers[0], answers[1]);
+    let body = json!({"kind": "points2d", "points": points, "k_max": 3.0});
+    let (status, _, answer) = send(&app, post(&body)).await;
+    assert_eq!(status, StatusCode::OK, "{answer}");
 }
 
 /// Unrefined, a curve or correspondence fit may answer its network's outlier group -1, which

@@ -37,13 +37,13 @@ pub struct FitRequest {
     /// images; its shape is checked with the other fields, with a clear message.
     #[serde(default)]
     pub image_size: Option<serde_json::Value>,
-    #[serde(default)]
+    #[serde(default, deserialize_with = "whole")]
     pub k: Option<usize>,
-    #[serde(default)]
+    #[serde(default, deserialize_with = "whole")]
     pub k_max: Option<usize>,
     #[serde(default)]
     pub selection: Option<String>,
-    #[serde(default)]
+    #[serde(default, deserialize_with = "whole")]
     pub seed: Option<u64>,
     #[serde(default)]
     pub return_embeddings: Option<bool>,
@@ -63,6 +63,51 @@ pub struct FitRequest {
     /// where it was not (its values there are ignored).
     #[serde(default)]
     pub visible: Option<Vec<Vec<Seen>>>,
+}
+
+/// A count or a seed as sent: a whole number, written `4` or `4.0` (clients that hold every
+/// number as a float send the latter), or null for the default. A fraction, a negative number
+/// or one past the type's range is refused with its value.
+fn whole<'de, D, T>(deserializer: D) -> Result<Option<T>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: TryFrom<u64>,
+{
+    struct Whole<T>(std::marker::PhantomData<T>);
+    impl<T: TryFrom<u64>> serde::de::Visitor<'_> for Whole<T> {
+        type Value = Option<T>;
+        fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+            f.write_str("a whole number >= 0")
+        }
+        fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Option<T>, E> {
+            T::try_from(v)
+                .map(Some)
+                .map_err(|_| E::custom(format!("{v} is too large: a whole number is expected here")))
+        }
+        fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Option<T>, E> {
+            match u64::try_from(v) {
+                Ok(v) => self.visit_u64(v),
+                Err(_) => Err(E::custom(format!("{v} is negative: a whole number is expected here"))),
+            }
+        }
+        fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Option<T>, E> {
+            // Past 2^53 a float no longer holds every whole number: refused rather than rounded.
+            if v.fract() == 0.0 && (0.0..=9_007_199_254_740_992.0).contains(&v) {
+                self.visit_u64(v as u64)
+            } else {
+                Err(E::custom(format!(
+                    "{v} has a fraction or is too large: a whole number is expected here"
+                )))
+            }
+        }
+        fn visit_unit<E: serde::de::Error>(self) -> Result<Option<T>, E> {
+            Ok(None)
+        }
+        fn visit_none<E: serde::de::Error>(self) -> Result<Option<T>, E> {
+            Ok(None)
+        }
+    }
+    deserializer.deserialize_any(Whole(std::marker::PhantomData))
 }
 
 /// One coordinate as sent: a number, or null (NaN here) for a track's position in a frame
