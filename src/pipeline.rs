@@ -31,7 +31,7 @@ use std::time::Instant;
 
 use crate::cluster::{self, ClusterError, ClusterParams, Clustering, Points, Selection};
 use crate::data::features::with_neighbors;
-use crate::data::screen::{self, Screened, screen};
+use crate::data::screen::{self, Copies, Screened, screen};
 use crate::data::symmetry::closure;
 use crate::data::visibility::MIN_SEEN_FRAMES;
 use crate::data::{ImageSize, Kind, Normalization, PointSet, Symmetry, Visibility};
@@ -216,8 +216,9 @@ struct ReadPlan {
 }
 
 /// Stage 1: how the model reads the set. No row far from the rest, and, for a network that
-/// reads neighbourhoods, each distinct row once ([`screen`]: both give the network a picture it
-/// was never trained on); then, for cards that
+/// reads neighbourhoods, each distinct row once, and for one read at its training density no
+/// near copy of a row either ([`screen`]: each gives the network a picture it was never trained
+/// on); then, for cards that
 /// record their training spacing ([`density::reading`]), a set denser than training at a seeded
 /// subset, one sparser than the card's sparse network's threshold by that network. Rows not
 /// read take their nearest read row's embedding. `whole` is the set as sent (rows compared over
@@ -231,7 +232,12 @@ fn read_plan(
 ) -> Result<ReadPlan, FitError> {
     let card = &model.card;
     let neighbourhoods = card.architecture.neighbors > 0 || card.architecture.graph_neighbors > 0;
-    let Screened { read: kept, far } = screen(whole, neighbourhoods);
+    let copies = match (neighbourhoods, card.spacing) {
+        (false, _) => Copies::AsSent,
+        (true, None) => Copies::Exact,
+        (true, Some(_)) => Copies::Near,
+    };
+    let Screened { read: kept, far } = screen(whole, copies);
     let Some(trained) = card.spacing else {
         return Ok(ReadPlan {
             thinned: kept.map(|rows| owned_by_nearest(model, read, image, rows)),

@@ -80,14 +80,16 @@ where
             f.write_str("a whole number >= 0")
         }
         fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Option<T>, E> {
-            T::try_from(v)
-                .map(Some)
-                .map_err(|_| E::custom(format!("{v} is too large: a whole number is expected here")))
+            T::try_from(v).map(Some).map_err(|_| {
+                E::custom(format!("{v} is too large: a whole number is expected here"))
+            })
         }
         fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Option<T>, E> {
             match u64::try_from(v) {
                 Ok(v) => self.visit_u64(v),
-                Err(_) => Err(E::custom(format!("{v} is negative: a whole number is expected here"))),
+                Err(_) => Err(E::custom(format!(
+                    "{v} is negative: a whole number is expected here"
+                ))),
             }
         }
         fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Option<T>, E> {
