@@ -240,7 +240,9 @@ fn read_plan(
     let Screened { read: kept, far } = screen(whole, copies);
     let Some(trained) = card.spacing else {
         return Ok(ReadPlan {
-            thinned: kept.map(|rows| owned_by_nearest(model, read, image, rows)),
+            thinned: kept
+                .map(|rows| owned_by_nearest(model, read, image, rows, &far))
+                .transpose()?,
             sparse: false,
             far,
         });
@@ -269,13 +271,15 @@ fn read_plan(
     };
     // Every row in the frame the subset was read in: the same normalisation where every row is
     // in the subset.
-    let thinned = rows.map(|rows| match subset {
-        Cow::Borrowed(_) => {
-            let owner = density::nearest_read(&normalised, read.dim(), &rows);
-            (rows, owner)
-        }
-        Cow::Owned(_) => owned_by_nearest(model, read, image, rows),
-    });
+    let thinned = rows
+        .map(|rows| match subset {
+            Cow::Borrowed(_) => {
+                let owner = density::nearest_read(&normalised, read.dim(), &rows);
+                Ok((rows, owner))
+            }
+            Cow::Owned(_) => owned_by_nearest(model, read, image, rows, &far),
+        })
+        .transpose()?;
     Ok(ReadPlan {
         thinned,
         sparse,
@@ -283,17 +287,58 @@ fn read_plan(
     })
 }
 
-/// The `rows` of `read` a model reads, and for every row of `read` its nearest read row (in
-/// the card's normalised frame, where a row read is its own).
+/// The `rows` of `read` a model reads (ascending, none of them `far`), and for every row of
+/// `read` its nearest read row (in the card's normalised frame of the rows that are not far,
+/// where a row read is its own: a far row in the frame would squeeze the others together, and
+/// in f32 a near copy could no longer tell its row from its neighbours; a far row takes the
+/// read row nearest it in the caller's units).
 fn owned_by_nearest(
     model: &LoadedModel,
     read: &PointSet,
     image: Option<ImageSize>,
     rows: Vec<usize>,
-) -> (Vec<usize>, Vec<usize>) {
-    let normalised = model.card.normalization.apply(read, image);
-    let owner = density::nearest_read(&normalised, read.dim(), &rows);
-    (rows, owner)
+    far: &[usize],
+) -> Result<(Vec<usize>, Vec<usize>), FitError> {
+    let dim = read.dim();
+    if far.is_empty() {
+        let normalised = model.card.normalization.apply(read, image);
+        let owner = density::nearest_read(&normalised, dim, &rows);
+        return Ok((rows, owner));
+    }
+    let near: Vec<usize> = (0..read.len())
+        .filter(|i| far.binary_search(i).is_err())
+        .collect();
+    let subset = read
+        .select(&near)
+        .map_err(|e| FitError::Input(e.to_string()))?;
+    let normalised = model.card.normalization.apply(&subset, image);
+    // Each read row's place among the rows that are not far (every read row is one of them).
+    let places: Vec<usize> = rows
+        .iter()
+        .filter_map(|r| near.binary_search(r).ok())
+        .collect();
+    let owner_near = density::nearest_read(&normalised, dim, &places);
+    let nearest_in_units = |i: usize| {
+        let p = read.row(i);
+        (0..rows.len())
+            .min_by(|&a, &b| {
+                let d = |r: usize| -> f64 {
+                    p.iter()
+                        .zip(read.row(rows[r]))
+                        .map(|(x, y)| (x - y).powi(2))
+                        .sum()
+                };
+                d(a).total_cmp(&d(b))
+            })
+            .unwrap_or(0)
+    };
+    let owner = (0..read.len())
+        .map(|i| match near.binary_search(&i) {
+            Ok(place) => owner_near[place],
+            Err(_) => nearest_in_units(i),
+        })
+        .collect();
+    Ok((rows, owner))
 }
 
 /// The embeddings of a set: one row per point read.

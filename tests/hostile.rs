@@ -373,7 +373,7 @@ fn cases() -> Vec<Case> {
         ),
         ("k as a string", good_with(json!({"k": "2"}))),
         ("k as 2.5", good_with(json!({"k": 2.5}))),
-        ("k as 2.0", good_with(json!({"k": 2.0}))),
+        ("k as -1", good_with(json!({"k": -1}))),
         ("k as 1e30", good_with(json!({"k": 1e30}))),
         ("k as a boolean", good_with(json!({"k": true}))),
         ("visible as a string", good_with(json!({"visible": "all"}))),
@@ -445,6 +445,13 @@ fn cases() -> Vec<Case> {
             Error(422, "invalid_request"),
         );
     }
+    // A whole number written as a float (a JavaScript or numpy client) is taken.
+    fit(
+        &mut cases,
+        "k and seed as 2.0 and 7.0",
+        serde_json::to_vec(&good_with(json!({"k": 2.0, "seed": 7.0}))).unwrap(),
+        Expect::Fit(GOOD_N),
+    );
     fit(
         &mut cases,
         "duplicate field",
