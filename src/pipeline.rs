@@ -31,7 +31,7 @@ use std::time::Instant;
 
 use crate::cluster::{self, ClusterError, ClusterParams, Clustering, Points, Selection};
 use crate::data::features::with_neighbors;
-use crate::data::screen::{self, Copies, Screened, screen};
+use crate::data::screen::{self, Screened, screen};
 use crate::data::symmetry::closure;
 use crate::data::visibility::MIN_SEEN_FRAMES;
 use crate::data::{ImageSize, Kind, Normalization, PointSet, Symmetry, Visibility};
@@ -216,9 +216,8 @@ struct ReadPlan {
 }
 
 /// Stage 1: how the model reads the set. No row far from the rest, and, for a network that
-/// reads neighbourhoods, each distinct row once, and for one read at its training density no
-/// near copy of a row either ([`screen`]: each gives the network a picture it was never trained
-/// on); then, for cards that
+/// reads neighbourhoods, each distinct row once ([`screen`]: both give the network a picture it
+/// was never trained on); then, for cards that
 /// record their training spacing ([`density::reading`]), a set denser than training at a seeded
 /// subset, one sparser than the card's sparse network's threshold by that network. Rows not
 /// read take their nearest read row's embedding. `whole` is the set as sent (rows compared over
@@ -232,12 +231,7 @@ fn read_plan(
 ) -> Result<ReadPlan, FitError> {
     let card = &model.card;
     let neighbourhoods = card.architecture.neighbors > 0 || card.architecture.graph_neighbors > 0;
-    let copies = match (neighbourhoods, card.spacing) {
-        (false, _) => Copies::AsSent,
-        (true, None) => Copies::Exact,
-        (true, Some(_)) => Copies::Near,
-    };
-    let Screened { read: kept, far } = screen(whole, copies);
+    let Screened { read: kept, far } = screen(whole, neighbourhoods);
     let Some(trained) = card.spacing else {
         return Ok(ReadPlan {
             thinned: kept
@@ -269,8 +263,8 @@ fn read_plan(
             (Some(rows), false)
         }
     };
-    // Every row in the frame the subset was read in: the same normalisation where every row is
-    // in the subset.
+    // Each row's nearest read row: in the frame the subset was read in where every row is in
+    // it, otherwise in the frame of the rows that are not far ([`owned_by_nearest`]).
     let thinned = rows
         .map(|rows| match subset {
             Cow::Borrowed(_) => {
@@ -290,8 +284,8 @@ fn read_plan(
 /// The `rows` of `read` a model reads (ascending, none of them `far`), and for every row of
 /// `read` its nearest read row (in the card's normalised frame of the rows that are not far,
 /// where a row read is its own: a far row in the frame would squeeze the others together, and
-/// in f32 a near copy could no longer tell its row from its neighbours; a far row takes the
-/// read row nearest it in the caller's units).
+/// in f32 a row left out could no longer tell the read row nearest it from its neighbours; a
+/// far row takes the read row nearest it in the caller's units).
 fn owned_by_nearest(
     model: &LoadedModel,
     read: &PointSet,
@@ -317,25 +311,18 @@ fn owned_by_nearest(
         .iter()
         .filter_map(|r| near.binary_search(r).ok())
         .collect();
+    debug_assert_eq!(places.len(), rows.len(), "a read row is far");
     let owner_near = density::nearest_read(&normalised, dim, &places);
-    let nearest_in_units = |i: usize| {
-        let p = read.row(i);
-        (0..rows.len())
-            .min_by(|&a, &b| {
-                let d = |r: usize| -> f64 {
-                    p.iter()
-                        .zip(read.row(rows[r]))
-                        .map(|(x, y)| (x - y).powi(2))
-                        .sum()
-                };
-                d(a).total_cmp(&d(b))
-            })
-            .unwrap_or(0)
-    };
+    // Far rows: the nearest read row in the caller's units (f32 holds a far row's distance
+    // well enough to rank the read rows from it).
+    let units: Vec<f32> = (0..read.len())
+        .flat_map(|i| read.row(i).iter().map(|&v| v as f32))
+        .collect();
+    let owner_far = density::nearest_read(&units, dim, &rows);
     let owner = (0..read.len())
         .map(|i| match near.binary_search(&i) {
             Ok(place) => owner_near[place],
-            Err(_) => nearest_in_units(i),
+            Err(_) => owner_far[i],
         })
         .collect();
     Ok((rows, owner))

@@ -94,7 +94,11 @@ where
         }
         fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Option<T>, E> {
             // Past 2^53 a float no longer holds every whole number: refused rather than rounded.
-            if v.fract() == 0.0 && (0.0..=9_007_199_254_740_992.0).contains(&v) {
+            if v < 0.0 {
+                Err(E::custom(format!(
+                    "{v} is negative: a whole number is expected here"
+                )))
+            } else if v.fract() == 0.0 && v < 9_007_199_254_740_992.0 {
                 self.visit_u64(v as u64)
             } else {
                 Err(E::custom(format!(

@@ -9,18 +9,6 @@
 //! repeats as sent: to it a repeat is one more row, and reading it once only moved K on a few
 //! AdelaideRMF pairs, both ways.
 //!
-//! **Near copies.** For the network read at its training density (a card that records its
-//! training spacing: `lce`), rows that differ by less than [`SAME_POINT`] of the set's RMS
-//! spread are one point seen twice as well (two scans merged, a point sampled twice with a
-//! little jitter): a neighbour a hundredth of the set's extent away is as foreign to it as one
-//! at 0 (`lce` sets sent with a copy of each point 10⁻³ to 10⁻² of the spread off: 16.8 -> 17.8
-//! to 18.1 % error over 60 sets). Such a row is read once, at its first place; its copies take
-//! its embedding. The screen is greedy in row order (a row is a copy when it lies within that
-//! distance of a row already read), so a chain of rows each near the next is read at that
-//! spacing, not as one row. The correspondence and track networks screen exact repeats only:
-//! `adelaide-fundamental` was fine-tuned on AdelaideRMF, whose pairs hold rows that close, and
-//! reading them once moved its K by SOD on some pairs (grid means 3.98 -> 4.12 %).
-//!
 //! **Far rows.** A row far from the rest moves the normalisation (the centroid and the RMS
 //! spread, which it inflates) and the network's context normalisation (each channel's variance
 //! over the points), and squeezes every other point together: one point at (20, 20) beside an
@@ -41,13 +29,6 @@ use std::cmp::Ordering;
 
 use super::{MIN_POINTS, PointSet};
 
-/// Rows that differ by less than this share of the set's RMS spread (the root mean square
-/// distance of its distinct rows to their centroid) are one point seen twice.
-pub const SAME_POINT: f64 = 1e-2;
-/// Most rows read in one cell of the near-copy search; past it a row is taken as distinct
-/// (bounds the search where many rows agree in their first two coordinates alone).
-const CELL_ROWS: usize = 64;
-
 /// A row farther than this many RMS spreads of the other rows from their centroid is far.
 pub const FAR_SPREADS: f64 = 10.0;
 /// A far row is also at least this many of those spreads from the nearest of the rows nearer
@@ -56,17 +37,6 @@ pub const FAR_SPREADS: f64 = 10.0;
 pub const FAR_GAP: f64 = 2.0;
 /// The largest share of the rows that may be set apart as far.
 pub const MAX_FAR_SHARE: f64 = 0.05;
-
-/// Which copies of a row a network reads ([`screen`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Copies {
-    /// Every row as sent (a network that reads each row alone).
-    AsSent,
-    /// Each group of equal rows once.
-    Exact,
-    /// Each group of equal rows once, and no row within [`SAME_POINT`] spreads of a row read.
-    Near,
-}
 
 /// The rows of a set to read ([`screen`]).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -77,28 +47,24 @@ pub struct Screened {
     pub far: Vec<usize>,
 }
 
-/// `points` `[n, d]` -> the rows to read: less the far ones ([`far_rows`]), and, as `copies`
-/// says, the first of each group of equal rows only ([`equal_first`]), less the near copies of
-/// rows read before them ([`near_copies`], measured without the far rows, whose distance would
-/// inflate the spread); every row where fewer than [`MIN_POINTS`] rows are distinct.
-pub fn screen(points: &PointSet, copies: Copies) -> Screened {
-    let distinct = match copies {
-        Copies::AsSent => (0..points.len()).collect(),
-        Copies::Exact | Copies::Near => equal_first(points),
+/// `points` `[n, d]` -> the rows to read: less the far ones ([`far_rows`]), and, for a network
+/// that reads `neighbourhoods`, the first of each group of equal rows only; every row where
+/// fewer than [`MIN_POINTS`] rows are distinct.
+pub fn screen(points: &PointSet, neighbourhoods: bool) -> Screened {
+    let distinct = if neighbourhoods {
+        distinct_rows(points)
+    } else {
+        (0..points.len()).collect()
     };
     let far = far_rows(points, &distinct);
-    let mut read: Vec<usize> = distinct
+    // Fewer distinct rows than a set needs (every row alike): read as sent, as before.
+    if (far.is_empty() && distinct.len() == points.len()) || distinct.len() < MIN_POINTS {
+        return Screened { read: None, far };
+    }
+    let read = distinct
         .into_iter()
         .filter(|i| far.binary_search(i).is_err())
         .collect();
-    if copies == Copies::Near {
-        let near = near_copies(points, &read);
-        read.retain(|i| near.binary_search(i).is_err());
-    }
-    // Fewer distinct rows than a set needs (every row alike): read as sent, as before.
-    if (far.is_empty() && read.len() == points.len()) || read.len() + far.len() < MIN_POINTS {
-        return Screened { read: None, far };
-    }
     Screened {
         read: Some(read),
         far,
@@ -106,7 +72,7 @@ pub fn screen(points: &PointSet, copies: Copies) -> Screened {
 }
 
 /// The first row of each group of equal rows of `points`, ascending.
-pub fn equal_first(points: &PointSet) -> Vec<usize> {
+pub fn distinct_rows(points: &PointSet) -> Vec<usize> {
     let n = points.len();
     let cmp = |a: &usize, b: &usize| -> Ordering {
         points
@@ -130,73 +96,6 @@ pub fn equal_first(points: &PointSet) -> Vec<usize> {
     }
     keep.sort_unstable();
     keep
-}
-
-/// The rows among `among` (ascending, pairwise distinct) that lie within ε = [`SAME_POINT`] ×
-/// the RMS spread of `among` of a row before them that is not itself such a copy, ascending.
-/// Rows are binned on a grid of side ε over their first two coordinates; a row is compared
-/// with the rows kept in its own and the eight neighbouring cells.
-pub fn near_copies(points: &PointSet, among: &[usize]) -> Vec<usize> {
-    let d = points.dim();
-    let m = among.len();
-    if m < 2 || d < 2 {
-        return Vec::new();
-    }
-    let mut centroid = vec![0.0; d];
-    for &i in among {
-        for (c, x) in centroid.iter_mut().zip(points.row(i)) {
-            *c += x / m as f64;
-        }
-    }
-    let spread2 = among
-        .iter()
-        .map(|&i| {
-            points
-                .row(i)
-                .iter()
-                .zip(&centroid)
-                .map(|(x, c)| (x - c).powi(2))
-                .sum::<f64>()
-        })
-        .sum::<f64>()
-        / m as f64;
-    let eps = SAME_POINT * spread2.sqrt();
-    if !(eps > 0.0 && eps.is_finite()) {
-        return Vec::new();
-    }
-    let cell = |i: usize| {
-        let r = points.row(i);
-        ((r[0] / eps).floor() as i64, (r[1] / eps).floor() as i64)
-    };
-    let mut kept: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
-    let mut copies = Vec::new();
-    for &i in among {
-        let (cx, cy) = cell(i);
-        let row = points.row(i);
-        let near = (-1..=1).any(|dx| {
-            (-1..=1).any(|dy| {
-                kept.get(&(cx + dx, cy + dy)).is_some_and(|rows| {
-                    rows.iter().any(|&j| {
-                        let d2: f64 = row
-                            .iter()
-                            .zip(points.row(j))
-                            .map(|(a, b)| (a - b).powi(2))
-                            .sum();
-                        d2 < eps * eps
-                    })
-                })
-            })
-        });
-        if near {
-            copies.push(i);
-        } else {
-            let rows = kept.entry((cx, cy)).or_default();
-            if rows.len() < CELL_ROWS {
-                rows.push(i);
-            }
-        }
-    }
-    copies
 }
 
 /// The rows among `among` (ascending) that lie far from the others. Rows are taken in order of
@@ -272,9 +171,9 @@ mod tests {
     use super::*;
     use crate::data::Kind;
 
-    /// [`screen`] for the network read at its training density.
+    /// [`screen`] for a network that reads neighbourhoods.
     fn screen_n(points: &PointSet) -> Screened {
-        screen(points, Copies::Near)
+        screen(points, true)
     }
 
     fn set(rows: &[[f64; 2]]) -> PointSet {
@@ -313,60 +212,9 @@ mod tests {
         // Row 3 is the first of the two copies of circle()[7], now also at row 8.
         assert!(screened.far.is_empty());
         assert_eq!(
-            equal_first(&set(&[[2.0, 1.0], [0.0, 1.0], [2.0, 1.0], [0.0, 1.0]])),
+            distinct_rows(&set(&[[2.0, 1.0], [0.0, 1.0], [2.0, 1.0], [0.0, 1.0]])),
             [0, 1]
         );
-    }
-
-    #[test]
-    fn rows_within_a_thousandth_of_the_spread_are_read_once() {
-        // The circle's RMS spread is 2: rows 3e-3 off are copies, rows 4e-2 off are not.
-        let mut rows = circle();
-        rows.extend(circle().iter().map(|p| [p[0] + 2e-3, p[1] - 2e-3]));
-        let read = screen_n(&set(&rows)).read.unwrap();
-        assert_eq!(read, (0..200).collect::<Vec<_>>());
-        // Networks that screen exact repeats only read them all.
-        assert_eq!(screen(&set(&rows), Copies::Exact).read, None);
-        let mut rows = circle();
-        rows.extend(circle().iter().map(|p| [p[0] + 3e-2, p[1] - 3e-2]));
-        assert_eq!(screen_n(&set(&rows)).read, None);
-        // A copy that comes first is the row read.
-        let mut rows = circle();
-        rows.insert(0, [rows[5][0] - 1e-3, rows[5][1]]);
-        let read = screen_n(&set(&rows)).read.unwrap();
-        assert_eq!(read.len(), 200);
-        assert!(read.contains(&0) && !read.contains(&6), "{read:?}");
-    }
-
-    #[test]
-    fn a_chain_of_near_rows_is_read_at_the_screens_spacing() {
-        // 2000 rows 1e-3 apart along a line of length 2, beside the circle: the chain is not
-        // one point, and no read row of it has another within the screen's distance.
-        let mut rows = circle();
-        rows.extend((0..2000).map(|i| [5.0 + 1e-3 * i as f64, 0.0]));
-        let points = set(&rows);
-        let read = screen_n(&points).read.unwrap();
-        let line: Vec<f64> = read
-            .iter()
-            .filter(|&&i| i >= 200)
-            .map(|&i| rows[i][0])
-            .collect();
-        assert!(line.len() > 10, "{}", line.len());
-        let spread = {
-            let all = (0..rows.len()).collect::<Vec<_>>();
-            let c =
-                [0, 1].map(|k| all.iter().map(|&i| rows[i][k]).sum::<f64>() / rows.len() as f64);
-            (all.iter()
-                .map(|&i| (rows[i][0] - c[0]).powi(2) + (rows[i][1] - c[1]).powi(2))
-                .sum::<f64>()
-                / rows.len() as f64)
-                .sqrt()
-        };
-        assert!(
-            line.windows(2)
-                .all(|w| w[1] - w[0] >= SAME_POINT * spread * 0.999)
-        );
-        assert!(screen(&points, Copies::AsSent).read.is_none());
     }
 
     #[test]
@@ -374,7 +222,7 @@ mod tests {
         let mut rows = circle();
         rows.extend(circle());
         rows.push([1e6, 1e6]);
-        let screened = screen(&set(&rows), Copies::AsSent);
+        let screened = screen(&set(&rows), false);
         assert_eq!(screened.far, [400]);
         assert_eq!(screened.read.unwrap(), (0..400).collect::<Vec<_>>());
     }
