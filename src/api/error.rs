@@ -80,7 +80,7 @@ error_codes! {
     UnknownModel = "unknown_model", UNPROCESSABLE_ENTITY,
         "No loaded model has that name, or none serves the request's kind.";
     ModelMismatch = "model_mismatch", UNPROCESSABLE_ENTITY,
-        "The model takes another kind or row width (for tracks: another frame count).";
+        "The model takes another kind or row width.";
     TooManyPoints = "too_many_points", UNPROCESSABLE_ENTITY,
         "More points than the server's --max-points.";
     TooManyFrames = "too_many_frames", UNPROCESSABLE_ENTITY,

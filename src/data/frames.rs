@@ -15,9 +15,9 @@
 //!   the frame rate the model was trained on. F ≤ F_m gives the one window `First` reads.
 //!
 //! A position at a fractional time is interpolated linearly between its two frames; a track of
-//! fewer than F_m frames is thus read at interpolated times between its real ones. Every track must
-//! be visible in every frame: requests carry no visibility mask, and a missing value cannot be
-//! sent (JSON has no NaN).
+//! fewer than F_m frames is thus read at interpolated times between its real ones. The tracks read
+//! are those seen in every frame; a request's `visible` mask places the others afterwards
+//! ([`crate::data::Visibility`]).
 
 use serde::{Deserialize, Serialize};
 
