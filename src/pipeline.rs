@@ -299,9 +299,7 @@ fn owned_by_nearest(
         let owner = density::nearest_read(&normalised, dim, &rows);
         return Ok((rows, owner));
     }
-    let near: Vec<usize> = (0..read.len())
-        .filter(|i| far.binary_search(i).is_err())
-        .collect();
+    let near = screen::not_far(read.len(), far);
     let subset = read
         .select(&near)
         .map_err(|e| FitError::Input(e.to_string()))?;
@@ -314,17 +312,22 @@ fn owned_by_nearest(
     debug_assert_eq!(places.len(), rows.len(), "a read row is far");
     let owner_near = density::nearest_read(&normalised, dim, &places);
     // Far rows: the nearest read row in the caller's units (f32 holds a far row's distance
-    // well enough to rank the read rows from it).
-    let units: Vec<f32> = (0..read.len())
-        .flat_map(|i| read.row(i).iter().map(|&v| v as f32))
+    // well enough to rank the read rows from it), searched among the read rows alone: in
+    // `units` the read rows come first, in order, then the far ones.
+    let units: Vec<f32> = rows
+        .iter()
+        .chain(far)
+        .flat_map(|&i| read.row(i).iter().map(|&v| v as f32))
         .collect();
-    let owner_far = density::nearest_read(&units, dim, &rows);
-    let owner = (0..read.len())
-        .map(|i| match near.binary_search(&i) {
-            Ok(place) => owner_near[place],
-            Err(_) => owner_far[i],
-        })
-        .collect();
+    let first: Vec<usize> = (0..rows.len()).collect();
+    let owner_far = density::nearest_read(&units, dim, &first);
+    let mut owner = vec![0; read.len()];
+    for (&i, &o) in near.iter().zip(&owner_near) {
+        owner[i] = o;
+    }
+    for (&i, &o) in far.iter().zip(&owner_far[rows.len()..]) {
+        owner[i] = o;
+    }
     Ok((rows, owner))
 }
 
@@ -479,16 +482,36 @@ pub fn cluster(
     Ok(clustering)
 }
 
+/// The rows refinement fits: every row of `points`, or, where some lie far from the rest
+/// ([`Embedding::far`]), the others, selected once per fit for all its refinements.
+pub struct RefineRows<'a> {
+    points: &'a PointSet,
+    far: &'a [usize],
+    /// The rows that are not far, and the set of them; `None` when no row is far.
+    near: Option<(Vec<usize>, PointSet)>,
+}
+
+impl<'a> RefineRows<'a> {
+    pub fn new(points: &'a PointSet, far: &'a [usize]) -> Self {
+        let near = (!far.is_empty())
+            .then(|| {
+                let near = screen::not_far(points.len(), far);
+                points.select(&near).ok().map(|kept| (near, kept))
+            })
+            .flatten();
+        Self { points, far, near }
+    }
+}
+
 /// Stage 5: the learned clustering refined into explicit structures of the model's family,
-/// on `points` as the caller sent them. Rows `far` from the rest ([`Embedding::far`]) take no
+/// on the points as the caller sent them. Rows far from the rest ([`Embedding::far`]) take no
 /// part: they would sway the fits of the groups they were clustered with (a normalisation that
 /// centres and scales a group's rows moves with them). They are answered −1 where outliers may
 /// be, else joined to the structure they are nearest.
 pub fn refine(
     model: &LoadedModel,
-    points: &PointSet,
+    rows: &RefineRows,
     clustering: &Clustering,
-    far: &[usize],
     params: &RefineParams,
 ) -> Refined {
     // A K the caller gave is kept; a chosen one may change within the K the choice considered.
@@ -507,28 +530,22 @@ pub fn refine(
             model.pool(),
         )
     };
-    if far.is_empty() {
-        return on(points, &clustering.labels);
-    }
-    // Every group keeps rows: a far row takes the label of its nearest read row.
-    let near: Vec<usize> = (0..points.len())
-        .filter(|i| far.binary_search(i).is_err())
-        .collect();
-    let Ok(kept) = points.select(&near) else {
-        return on(points, &clustering.labels);
+    let Some((near, kept)) = &rows.near else {
+        return on(rows.points, &clustering.labels);
     };
+    // Every group keeps rows: a far row takes the label of its nearest read row.
     let labels: Vec<usize> = near.iter().map(|&i| clustering.labels[i]).collect();
-    let mut refined = on(&kept, &labels);
-    let mut all = vec![-1; points.len()];
+    let mut refined = on(kept, &labels);
+    let mut all = vec![-1; rows.points.len()];
     for (&i, &l) in near.iter().zip(&refined.labels) {
         all[i] = l;
     }
     if !params.outliers {
-        for &i in far {
+        for &i in rows.far {
             let nearest = refined
                 .structures
                 .iter()
-                .map(|s| (s.model.residual(points.row(i)), s.label as i64))
+                .map(|s| (s.model.residual(rows.points.row(i)), s.label as i64))
                 .min_by(|a, b| a.0.total_cmp(&b.0));
             all[i] = nearest.map_or(-1, |(_, l)| l);
         }
@@ -557,19 +574,17 @@ pub fn refine_chosen(
     let k = clustering.k;
     let considered = clustering.scores.iter().map(|s| s.0).max().unwrap_or(k);
     let read = embedding.values.len() / embedding.width.max(1);
+    let rows = RefineRows::new(points, &embedding.far);
     if matches!(clustering.selection, Selection::Fixed(_))
         || model.card.family() == geometry::Family::Subspace
         || k + 1 > considered.min(read)
     {
-        return Ok((
-            clustering.clone(),
-            refine(model, points, clustering, &embedding.far, r),
-        ));
+        return Ok((clustering.clone(), refine(model, &rows, clustering, r)));
     }
     let wider = one_more_group(model, embedding, params, clustering)?;
     let (refined, again) = model.pool().join(
-        || refine(model, points, clustering, &embedding.far, r),
-        || refine(model, points, &wider, &embedding.far, r),
+        || refine(model, &rows, clustering, r),
+        || refine(model, &rows, &wider, r),
     );
     if !refine::splits_pooled(&refined, &again, points.len()) {
         return Ok((clustering.clone(), refined));
@@ -580,7 +595,7 @@ pub fn refine_chosen(
             return Ok(None);
         }
         let next = one_more_group(model, embedding, params, from)?;
-        let answer = refine(model, points, &next, &embedding.far, r);
+        let answer = refine(model, &rows, &next, r);
         Ok(Some((both_ks(from, next), answer)))
     })
 }
@@ -711,18 +726,15 @@ fn fit_counting(
                     let auto = params.with_chosen_k(model.card.selection, params.k_max().max(k));
                     let chosen = cluster(model, &embedding, &auto)?;
                     let pool = model.pool();
+                    let rows = RefineRows::new(points, &embedding.far);
                     let ((mut refined, again), other) = pool.join(
                         || {
                             pool.join(
-                                || refine(model, points, &clustering, &embedding.far, r),
-                                || {
-                                    wider
-                                        .as_ref()
-                                        .map(|w| refine(model, points, w, &embedding.far, r))
-                                },
+                                || refine(model, &rows, &clustering, r),
+                                || wider.as_ref().map(|w| refine(model, &rows, w, r)),
                             )
                         },
-                        || refine(model, points, &chosen, &embedding.far, r),
+                        || refine(model, &rows, &chosen, r),
                     );
                     // Refinement dissolves the outlier group into -1 labels, so the k + 1
                     // clustering is refined too, and its answer is kept when it has no more

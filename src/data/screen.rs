@@ -71,6 +71,11 @@ pub fn screen(points: &PointSet, neighbourhoods: bool) -> Screened {
     }
 }
 
+/// The rows 0..n that are not among `far` (ascending), ascending.
+pub fn not_far(n: usize, far: &[usize]) -> Vec<usize> {
+    (0..n).filter(|i| far.binary_search(i).is_err()).collect()
+}
+
 /// The first row of each group of equal rows of `points`, ascending.
 pub fn distinct_rows(points: &PointSet) -> Vec<usize> {
     let n = points.len();

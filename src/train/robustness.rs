@@ -647,10 +647,8 @@ pub fn add_outliers(seq: &Sequence, ratio: f64, rng: &mut ChaCha8Rng) -> Sequenc
 
 /// Every coordinate and the image size multiplied by `factor`.
 pub fn rescale(seq: &Sequence, factor: f64) -> Sequence {
-    let values: Vec<f64> = seq.points.values().iter().map(|v| v * factor).collect();
     Sequence {
-        points: PointSet::from_flat(seq.points.kind(), seq.points.dim(), values)
-            .expect("finite values"),
+        points: each_value(seq, |v| v * factor),
         image_size: seq
             .image_size
             .map(|s| ImageSize::new(s.width * factor, s.height * factor).expect("positive")),
@@ -661,12 +659,16 @@ pub fn rescale(seq: &Sequence, factor: f64) -> Sequence {
 /// Every coordinate rounded to the nearest whole pixel (a tracker that reports integer
 /// positions).
 pub fn whole_pixels(seq: &Sequence) -> Sequence {
-    let values: Vec<f64> = seq.points.values().iter().map(|v| v.round()).collect();
     Sequence {
-        points: PointSet::from_flat(seq.points.kind(), seq.points.dim(), values)
-            .expect("finite values"),
+        points: each_value(seq, f64::round),
         ..seq.clone()
     }
+}
+
+/// `seq`'s points with `map` applied to every coordinate (finite to finite).
+fn each_value(seq: &Sequence, map: impl Fn(f64) -> f64) -> PointSet {
+    let values: Vec<f64> = seq.points.values().iter().map(|&v| map(v)).collect();
+    PointSet::from_flat(seq.points.kind(), seq.points.dim(), values).expect("finite values")
 }
 
 /// The second image taken at `factor` times the first's resolution: its coordinates and its
