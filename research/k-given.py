@@ -8,7 +8,8 @@ running server.
   python3 research/k-given.py PORT DIR            LCE sets written by gen-lce, e.g.
       multifit-train gen-lce --out runs/data/kc-out --count 100 --seed 7101 --scale 2 --outliers 0.2
 
-REFINE=0 in the environment fits without refinement; K=auto sends no k (the card's selection
+REFINE=0 in the environment fits without refinement; ADELAIDE=DIR reads the pairs from DIR
+(for example rows shuffled by research/row-orders.py); K=auto sends no k (the card's selection
 chooses K), and "k kept" then counts answers whose k is the number of structures.
 research/k-given-loo.sh runs it on each fold model of a cv run."""
 import glob, json, os, sys
@@ -32,7 +33,7 @@ def requests():
             yield s["name"], s, {"kind": "points2d", "points": s["points"]}
         return
     kind = "homography" if "homography" in what else "fundamental"
-    for path in sorted(glob.glob("../shared/datasets/adelaidermf/*.json")):
+    for path in sorted(glob.glob(os.environ.get("ADELAIDE", "../shared/datasets/adelaidermf") + "/*.json")):
         d = json.load(open(path))
         if d.get("model_type") == kind and (not only or d["name"] == only):
             yield d["name"], d, {"kind": "correspondences", "model": what, "points": d["points"],

@@ -247,6 +247,18 @@ impl Sequence {
         self.rows(&order)
     }
 
+    /// Every row, in an order drawn uniformly at random (Fisher–Yates): the same set as a
+    /// caller whose tool lists its points in another order sends it.
+    pub fn shuffled(&self, rng: &mut impl rand::RngExt) -> Sequence {
+        let n = self.points.len();
+        let mut order: Vec<usize> = (0..n).collect();
+        for i in (1..n).rev() {
+            let j = rng.random_range(0..=i);
+            order.swap(i, j);
+        }
+        self.rows(&order)
+    }
+
     /// Frames `[start, start + len)` of a trajectory sequence: the rows visible in all of those
     /// frames, their `2 * len` values, labels renumbered. `None` when the frames do not exist or
     /// fewer than two points are visible throughout.

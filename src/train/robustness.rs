@@ -18,8 +18,10 @@
 //! - **correspondences** (AdelaideRMF pairs of the model's type): every pair as it is; each pair
 //!   subsampled to 50 % and 25 % of its points; with 20 % more points as gross outliers
 //!   (uniform over each image, in the outlier group); the coordinates and image size rescaled by
-//!   0.5 and by 2; and the pair without its image size (the bounding box stands in for it).
-//!   Random cells take `draws` seeded draws per pair.
+//!   0.5 and by 2; the pair without its image size (the bounding box stands in for it); the
+//!   second image at another resolution; every coordinate rounded to a whole pixel; and the
+//!   rows in a random order (the files list many points of one structure together, an order a
+//!   caller's matcher need not keep). Random cells take `draws` seeded draws per pair.
 //! - **trajectories** (KT3DMoSeg): the first clip of each sequence with frame strides 1, 2 and 3
 //!   (frames 1, 1 + s, ..., 1 + 4s: faster apparent motion), and stride 1 again on only the
 //!   sequences long enough for stride 3, so the two compare on the same sequences.
@@ -707,30 +709,109 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
         "image size sent",
         "second image scale",
         "whole pixels",
+        "rows shuffled",
     ]
     .map(String::from)
     .to_vec();
     let source = format!("AdelaideRMF {model_type} pairs ({})", seqs.len());
-    // (name, points kept, added outliers, image scale, image size sent, second image scale,
-    // coordinates rounded to whole pixels)
-    let specs: [(&str, f64, f64, f64, bool, f64, bool); 10] = [
-        ("as-is", 1.0, 0.0, 1.0, true, 1.0, false),
-        ("subsample-50", 0.5, 0.0, 1.0, true, 1.0, false),
-        ("subsample-25", 0.25, 0.0, 1.0, true, 1.0, false),
-        ("outliers+20", 1.0, 0.2, 1.0, true, 1.0, false),
-        ("rescale-0.5", 1.0, 0.0, 0.5, true, 1.0, false),
-        ("rescale-2", 1.0, 0.0, 2.0, true, 1.0, false),
-        ("no-image-size", 1.0, 0.0, 1.0, false, 1.0, false),
-        ("second-image-1.5", 1.0, 0.0, 1.0, true, 1.5, false),
-        ("second-image-0.75", 1.0, 0.0, 1.0, true, 0.75, false),
-        ("whole-pixels", 1.0, 0.0, 1.0, true, 1.0, true),
+    // What each cell changes, from the pairs as they are.
+    #[derive(Clone, Copy)]
+    struct Spec {
+        name: &'static str,
+        /// Share of the points kept.
+        keep: f64,
+        /// Gross outliers added, as a share of the points.
+        outliers: f64,
+        /// Coordinates and image size multiplied by this.
+        factor: f64,
+        /// Whether the image size is sent.
+        image: bool,
+        /// The second image's resolution relative to the first's.
+        second: f64,
+        /// Coordinates rounded to whole pixels.
+        whole: bool,
+        /// Rows in a random order.
+        shuffled: bool,
+    }
+    const AS_IS: Spec = Spec {
+        name: "as-is",
+        keep: 1.0,
+        outliers: 0.0,
+        factor: 1.0,
+        image: true,
+        second: 1.0,
+        whole: false,
+        shuffled: false,
+    };
+    let specs = [
+        AS_IS,
+        Spec {
+            name: "subsample-50",
+            keep: 0.5,
+            ..AS_IS
+        },
+        Spec {
+            name: "subsample-25",
+            keep: 0.25,
+            ..AS_IS
+        },
+        Spec {
+            name: "outliers+20",
+            outliers: 0.2,
+            ..AS_IS
+        },
+        Spec {
+            name: "rescale-0.5",
+            factor: 0.5,
+            ..AS_IS
+        },
+        Spec {
+            name: "rescale-2",
+            factor: 2.0,
+            ..AS_IS
+        },
+        Spec {
+            name: "no-image-size",
+            image: false,
+            ..AS_IS
+        },
+        Spec {
+            name: "second-image-1.5",
+            second: 1.5,
+            ..AS_IS
+        },
+        Spec {
+            name: "second-image-0.75",
+            second: 0.75,
+            ..AS_IS
+        },
+        Spec {
+            name: "whole-pixels",
+            whole: true,
+            ..AS_IS
+        },
+        Spec {
+            name: "rows-shuffled",
+            shuffled: true,
+            ..AS_IS
+        },
     ];
     let builders = specs
         .into_iter()
-        .map(|(name, keep, outliers, factor, image, second, whole)| {
+        .map(|spec| {
+            let Spec {
+                name,
+                keep,
+                outliers,
+                factor,
+                image,
+                second,
+                whole,
+                shuffled,
+            } = spec;
             let seqs = seqs.clone();
             let source = source.clone();
-            let random = keep < 1.0 || outliers > 0.0;
+            let random = keep < 1.0 || outliers > 0.0 || shuffled;
             let build = move || {
                 let mut samples = Vec::new();
                 for seq in seqs.iter() {
@@ -761,7 +842,12 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
                     }
                     for draw in 0..draws {
                         let mut rng = rng_for(seed, name, &seq.name, draw);
-                        let (changed, what) = if keep < 1.0 {
+                        let (changed, what) = if shuffled {
+                            (
+                                seq.shuffled(&mut rng),
+                                format!("rows shuffled, draw {draw}"),
+                            )
+                        } else if keep < 1.0 {
                             let kept = seq.subsample(keep, &mut rng);
                             (kept, format!("{} %, draw {draw}", 100.0 * keep))
                         } else {
@@ -793,6 +879,7 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
                         ("image size sent", json!(image)),
                         ("second image scale", json!(second)),
                         ("whole pixels", json!(whole)),
+                        ("rows shuffled", json!(shuffled)),
                     ]),
                     data,
                     samples,
@@ -805,6 +892,7 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
     let notes = vec![
         "Known K counts the gross outliers as one group (AdelaideRMF's label 0), so K is the number of structures plus one wherever a pair has outliers.".to_string(),
         "Rescaling multiplies the coordinates and the image size together; the image-frame normalisation divides one by the other, so those cells test that invariance (by a power of two it is exact in floating point).".to_string(),
+        "The rows-shuffled cell sends each pair's rows in a random order (the order the pairs' files list them in groups many points of one structure together): the same sets, which a fit should answer alike in any order.".to_string(),
         "The whole-pixels cell rounds every coordinate to the nearest whole pixel, as trackers and annotation tools that report integer pixels do: about 0.29 px of uniform noise more per coordinate.".to_string(),
         "The second-image cells give the second view another resolution (a second camera) and send each image's size, [[w, h], [w2, h2]]: the fit reads and refines the second view in the first image's frame, and answers its structures in each image's own pixels. Scored by labels, these cells check that a second camera answers as one camera would, up to rounding.".to_string(),
     ];
@@ -1016,6 +1104,29 @@ mod tests {
     use super::*;
 
     use crate::data::dataset::tests::pair;
+
+    #[test]
+    fn shuffling_keeps_every_row_with_its_label_in_a_seeded_order() {
+        let seq = pair();
+        let a = seq.shuffled(&mut rng_for(1, "c", "pair", 0));
+        let b = seq.shuffled(&mut rng_for(1, "c", "pair", 0));
+        let c = seq.shuffled(&mut rng_for(1, "c", "pair", 1));
+        assert_eq!(a.points, b.points);
+        assert_ne!(a.points, c.points);
+        assert_ne!(a.points, seq.points);
+        // Each original row appears once, with its label (the pair's rows are distinct).
+        let mut seen = vec![false; seq.points.len()];
+        for i in 0..a.points.len() {
+            let j = (0..seq.points.len())
+                .find(|&j| seq.points.row(j) == a.points.row(i))
+                .unwrap();
+            assert!(!seen[j], "row {j} twice");
+            seen[j] = true;
+            assert_eq!(seq.labels[j], a.labels[i]);
+        }
+        assert!(seen.iter().all(|&s| s));
+        assert_eq!(a.image_size, seq.image_size);
+    }
 
     #[test]
     fn subsampling_keeps_a_seeded_share_in_order() {
