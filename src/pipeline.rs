@@ -20,7 +20,10 @@
 //!    With K chosen, the k + 1 clustering is refined too and answers where it parts structures
 //!    that pooled two, and from it the k + 2 one, and so on ([`refine_chosen`]); with a k given, where the outliers take a group of
 //!    their own, and the clustering K chosen would give answers where its k structures are far
-//!    less noisy ([`crate::refine::replaces_given`]).
+//!    less noisy ([`crate::refine::replaces_given`]). A small set of curves (at most
+//!    [`SEEDED_MAX_ROWS`] rows) is also clustered from more k-means seeds at the same K, and the
+//!    answer whose structures explain the rows at the least truncated cost is kept
+//!    ([`refine_seeded`]).
 //! 6. **answer** ([`FitOutcome`]): labels, K, structures, the residual curve and the stage
 //!    timings.
 
@@ -492,6 +495,13 @@ pub struct RefineRows<'a> {
 }
 
 impl<'a> RefineRows<'a> {
+    /// How many rows refinement fits.
+    pub fn count(&self) -> usize {
+        self.near
+            .as_ref()
+            .map_or(self.points.len(), |(near, _)| near.len())
+    }
+
     pub fn new(points: &'a PointSet, far: &'a [usize]) -> Self {
         let near = (!far.is_empty())
             .then(|| {
@@ -554,6 +564,69 @@ pub fn refine(
     refined
 }
 
+/// Sets whose refinement fits at most this many rows are refined from more k-means seeds
+/// ([`refine_seeded`]).
+pub const SEEDED_MAX_ROWS: usize = 500;
+/// The k-means seeds [`refine_seeded`] tries beyond the request's.
+pub const EXTRA_SEEDS: u64 = 3;
+
+/// [`refine`] of `clustering` (k-means of `embedding` with `params`' seed). On sets of curves
+/// whose refinement fits at most [`SEEDED_MAX_ROWS`] rows, k-means also
+/// clusters `embedding` at the same K from [`EXTRA_SEEDS`] more seeds, each partition not seen
+/// yet is refined too, and the answer is the first of least truncated cost
+/// ([`refine::cheapest`]). A few sets hold partitions of near-equal k-means residual that
+/// refinement takes to different answers, and the seed alone picks one; the cost of the
+/// structures on every row tells them apart. The clustering's K, residual curve and scores are
+/// those of `clustering` whichever partition the answer came from.
+pub fn refine_seeded(
+    model: &LoadedModel,
+    rows: &RefineRows,
+    embedding: &Embedding,
+    params: &ClusterParams,
+    clustering: &Clustering,
+    r: &RefineParams,
+) -> Result<Refined, FitError> {
+    let first = refine(model, rows, clustering, r);
+    if rows.count() > SEEDED_MAX_ROWS || model.card.family() != geometry::Family::Curves {
+        return Ok(first);
+    }
+    let mut seen = vec![first_seen(&clustering.labels)];
+    let mut answers = vec![first];
+    for i in 1..=EXTRA_SEEDS {
+        let seed = params
+            .seed()
+            .wrapping_add(i.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let mut other = cluster(
+            model,
+            embedding,
+            &params.with_fixed_k(clustering.k)?.with_seed(seed),
+        )?;
+        // Refined as `clustering` is: a chosen K may still merge or grow.
+        other.selection = clustering.selection;
+        other.scores = clustering.scores.clone();
+        let partition = first_seen(&other.labels);
+        if seen.contains(&partition) {
+            continue;
+        }
+        seen.push(partition);
+        answers.push(refine(model, rows, &other, r));
+    }
+    let best = refine::cheapest(rows.points, &answers, r.threshold);
+    Ok(answers.swap_remove(best))
+}
+
+/// Labels renumbered in order of first appearance: equal for two labellings of one partition.
+fn first_seen(labels: &[usize]) -> Vec<usize> {
+    let mut map = BTreeMap::new();
+    labels
+        .iter()
+        .map(|&l| {
+            let next = map.len();
+            *map.entry(l).or_insert(next)
+        })
+        .collect()
+}
+
 /// Stage 5 with K chosen automatically: the clustering refined, and the k + 1 clustering
 /// refined too where the choice considered k + 1 (the two side by side on the model's threads);
 /// the wider answer is kept where it splits a structure that pooled two
@@ -579,13 +652,15 @@ pub fn refine_chosen(
         || model.card.family() == geometry::Family::Subspace
         || k + 1 > considered.min(read)
     {
-        return Ok((clustering.clone(), refine(model, &rows, clustering, r)));
+        let refined = refine_seeded(model, &rows, embedding, params, clustering, r)?;
+        return Ok((clustering.clone(), refined));
     }
     let wider = one_more_group(model, embedding, params, clustering)?;
     let (refined, again) = model.pool().join(
-        || refine(model, &rows, clustering, r),
-        || refine(model, &rows, &wider, r),
+        || refine_seeded(model, &rows, embedding, params, clustering, r),
+        || refine_seeded(model, &rows, embedding, params, &wider, r),
     );
+    let (refined, again) = (refined?, again?);
     if !refine::splits_pooled(&refined, &again, points.len()) {
         return Ok((clustering.clone(), refined));
     }
@@ -595,7 +670,7 @@ pub fn refine_chosen(
             return Ok(None);
         }
         let next = one_more_group(model, embedding, params, from)?;
-        let answer = refine(model, &rows, &next, r);
+        let answer = refine_seeded(model, &rows, embedding, params, &next, r)?;
         Ok(Some((both_ks(from, next), answer)))
     })
 }
@@ -727,15 +802,13 @@ fn fit_counting(
                     let chosen = cluster(model, &embedding, &auto)?;
                     let pool = model.pool();
                     let rows = RefineRows::new(points, &embedding.far);
-                    let ((mut refined, again), other) = pool.join(
-                        || {
-                            pool.join(
-                                || refine(model, &rows, &clustering, r),
-                                || wider.as_ref().map(|w| refine(model, &rows, w, r)),
-                            )
-                        },
-                        || refine(model, &rows, &chosen, r),
+                    let seeded =
+                        |c: &Clustering| refine_seeded(model, &rows, &embedding, params, c, r);
+                    let ((refined, again), other) = pool.join(
+                        || pool.join(|| seeded(&clustering), || wider.as_ref().map(seeded)),
+                        || seeded(&chosen),
                     );
+                    let (mut refined, again, other) = (refined?, again.transpose()?, other?);
                     // Refinement dissolves the outlier group into -1 labels, so the k + 1
                     // clustering is refined too, and its answer is kept when it has no more
                     // than k structures and no fewer than the k clustering's. (Refining it only
@@ -1638,6 +1711,68 @@ impl LoadedModel {
 pub(crate) mod tests {
     use super::*;
     use crate::registry::tests::tiny;
+
+    /// `per` points on each of a unit circle at the origin, a circle of radius 2 at (6, 0) and
+    /// the line y = -4, noise about 0.02.
+    fn two_circles_and_a_line(per: usize) -> PointSet {
+        let values = (0..3 * per)
+            .flat_map(|i| {
+                let t = (i / 3) as f64 * std::f64::consts::TAU / per as f64;
+                let e = 0.02 * (((i * 7919) % 101) as f64 / 50.0 - 1.0);
+                match i % 3 {
+                    0 => [(1.0 + e) * t.cos(), (1.0 + e) * t.sin()],
+                    1 => [6.0 + (2.0 + e) * t.cos(), (2.0 + e) * t.sin()],
+                    _ => [-3.0 + 12.0 * (i / 3) as f64 / per as f64, -4.0 + e],
+                }
+            })
+            .collect();
+        PointSet::from_flat(Kind::Points2d, 2, values).unwrap()
+    }
+
+    #[test]
+    fn small_sets_of_curves_answer_from_the_cheapest_of_several_seeds() {
+        use crate::registry::tests::tiny_model;
+        // An untrained network: its embeddings part the curves poorly. Whichever seed's answer
+        // is kept, it explains the rows at no higher cost than the request's seed's.
+        let model = tiny_model("curves", Kind::Points2d, 2, 3);
+        let r = RefineParams {
+            threshold: Some(0.1),
+            ..RefineParams::default()
+        };
+        let cost = |points: &PointSet, answer: &Refined| {
+            crate::refine::truncated_cost(points, &answer.structures, 0.1)
+        };
+        for (per, seeded_search) in [(40, true), (200, false)] {
+            let points = two_circles_and_a_line(per);
+            let embedding = embed(&model, &points, None, &[], 0).unwrap();
+            let params = fixed(3);
+            let clustering = cluster(&model, &embedding, &params).unwrap();
+            let rows = RefineRows::new(&points, &embedding.far);
+            let first = refine(&model, &rows, &clustering, &r);
+            let answer =
+                refine_seeded(&model, &rows, &embedding, &params, &clustering, &r).unwrap();
+            assert_eq!(answer.labels.len(), points.len());
+            if seeded_search {
+                assert!(cost(&points, &answer) <= cost(&points, &first));
+                if answer != first {
+                    assert_eq!(answer.structures.len(), first.structures.len());
+                    assert!(cost(&points, &answer) < cost(&points, &first));
+                }
+            } else {
+                // 600 rows: past SEEDED_MAX_ROWS, one seed.
+                assert!(points.len() > SEEDED_MAX_ROWS);
+                assert_eq!(answer, first);
+            }
+        }
+    }
+
+    #[test]
+    fn labellings_of_one_partition_are_renumbered_alike() {
+        assert_eq!(first_seen(&[2, 2, 0, 1, 0]), vec![0, 0, 1, 2, 1]);
+        assert_eq!(first_seen(&[1, 1, 2, 0, 2]), first_seen(&[2, 2, 0, 1, 0]));
+        assert_ne!(first_seen(&[0, 1, 1]), first_seen(&[0, 0, 1]));
+        assert!(first_seen(&[]).is_empty());
+    }
 
     #[test]
     fn the_outlier_group_is_answered_minus_one_and_the_later_groups_move_down() {

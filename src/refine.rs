@@ -264,6 +264,54 @@ fn far_quieter(base: &Refined, other: &Refined, more_outliers: f64) -> bool {
         && other.outliers() as f64 <= base.outliers() as f64 + more_outliers
 }
 
+/// How well `structures` explain the rows of `points`: Σ_i min(d_i², τ²), d_i the row's
+/// smallest residual among them (caller's units). A row no structure explains within τ costs
+/// τ², as an outlier does, so an answer cannot lower its cost by leaving rows out.
+pub fn truncated_cost(points: &PointSet, structures: &[Structure], tau: f64) -> f64 {
+    let prepared: Vec<_> = structures.iter().map(|s| s.model.prepared()).collect();
+    (0..points.len())
+        .map(|i| {
+            let row = points.row(i);
+            let d = prepared
+                .iter()
+                .map(|p| p.residual_capped(row, tau))
+                .fold(tau, f64::min);
+            d * d
+        })
+        .sum()
+}
+
+/// Of several answers refined from different clusterings of the same `points` (the first the
+/// one a single start gives): the index of the first of least [`truncated_cost`] among those
+/// with as many structures as the first, τ = `threshold` or [`OUTLIER_SIGMAS`] × the least σ
+/// among them. 0 when `answers` holds one answer or none.
+pub fn cheapest(points: &PointSet, answers: &[Refined], threshold: Option<f64>) -> usize {
+    let Some(first) = answers.first() else {
+        return 0;
+    };
+    let alike: Vec<usize> = (0..answers.len())
+        .filter(|&i| answers[i].structures.len() == first.structures.len())
+        .collect();
+    if alike.len() < 2 {
+        return 0;
+    }
+    let sigma = alike
+        .iter()
+        .map(|&i| answers[i].sigma)
+        .fold(f64::INFINITY, f64::min);
+    let tau = threshold
+        .unwrap_or(OUTLIER_SIGMAS * sigma)
+        .max(f64::MIN_POSITIVE);
+    let mut best = (0, truncated_cost(points, &first.structures, tau));
+    for &i in &alike[1..] {
+        let cost = truncated_cost(points, &answers[i].structures, tau);
+        if cost < best.1 {
+            best = (i, cost);
+        }
+    }
+    best.0
+}
+
 /// The family of models a model card's structures follow.
 pub fn family_for(kind: Kind, name_hint: Option<Family>) -> Family {
     match (kind, name_hint) {
@@ -1153,6 +1201,84 @@ mod tests {
                 assert!(finite(&alone));
             }
         }
+    }
+
+    /// A line y = y0 as structure `label`.
+    fn line_structure(label: usize, y0: f64) -> Structure {
+        Structure {
+            label,
+            model: Model::Line {
+                a: 0.0,
+                b: 1.0,
+                c: -y0,
+            },
+            inliers: 2,
+            rms: 0.0,
+        }
+    }
+
+    #[test]
+    fn the_truncated_cost_counts_each_row_at_its_nearest_structure_up_to_tau() {
+        // On y = 0; 1 off it; 3 off y = 10 (nearer than y = 0); 5 off both.
+        let rows = vec![0.0, 0.0, 3.0, 1.0, 1.0, 7.0, 2.0, 5.0];
+        let points = PointSet::from_flat(Kind::Points2d, 2, rows).unwrap();
+        let lines = [line_structure(0, 0.0), line_structure(1, 10.0)];
+        let cost = truncated_cost(&points, &lines, 2.0);
+        assert!((cost - (0.0 + 1.0 + 4.0 + 4.0)).abs() < 1e-12, "{cost}");
+        let cost = truncated_cost(&points, &lines, 4.0);
+        assert!((cost - (0.0 + 1.0 + 9.0 + 16.0)).abs() < 1e-12, "{cost}");
+        // No structure, or a degenerate one: every row costs tau^2, never NaN.
+        assert_eq!(truncated_cost(&points, &[], 2.0), 16.0);
+        let degenerate = Structure {
+            model: Model::Degenerate {
+                reason: "too few points".into(),
+            },
+            ..line_structure(0, 0.0)
+        };
+        assert_eq!(truncated_cost(&points, &[degenerate], 2.0), 16.0);
+    }
+
+    #[test]
+    fn the_cheapest_answer_is_the_first_of_least_cost_among_those_with_as_many_structures() {
+        // Rows on y = 0 and y = 10.
+        let rows: Vec<f64> = (0..20)
+            .flat_map(|i| [i as f64, if i % 2 == 0 { 0.0 } else { 10.0 }])
+            .collect();
+        let points = PointSet::from_flat(Kind::Points2d, 2, rows).unwrap();
+        let answer = |lines: &[f64], sigma: f64| Refined {
+            labels: vec![0; 20],
+            structures: lines
+                .iter()
+                .enumerate()
+                .map(|(j, &y)| line_structure(j, y))
+                .collect(),
+            sigma,
+        };
+        let right = answer(&[0.0, 10.0], 0.1);
+        let wrong = answer(&[0.0, 5.0], 0.1);
+        let one = answer(&[0.0], 0.1);
+        assert_eq!(cheapest(&points, &[wrong.clone(), right.clone()], None), 1);
+        assert_eq!(cheapest(&points, &[right.clone(), wrong.clone()], None), 0);
+        // Equal costs keep the first.
+        assert_eq!(cheapest(&points, &[right.clone(), right.clone()], None), 0);
+        // Only answers with as many structures as the first compete.
+        assert_eq!(cheapest(&points, &[one.clone(), right.clone()], None), 0);
+        assert_eq!(
+            cheapest(&points, &[wrong.clone(), one, right.clone()], None),
+            2
+        );
+        // The caller's threshold sets tau. One line exact and one far off, against two lines
+        // each 0.5 off their rows: at tau = 0.1 the half explained exactly costs less
+        // (10 x 0.01 against 20 x 0.01), at tau = 10 the whole explained loosely does.
+        let half = answer(&[0.0, 100.0], 0.1);
+        let loose = answer(&[0.5, 9.5], 0.1);
+        assert_eq!(
+            cheapest(&points, &[loose.clone(), half.clone()], Some(0.1)),
+            1
+        );
+        assert_eq!(cheapest(&points, &[half, loose], Some(10.0)), 1);
+        assert_eq!(cheapest(&points, &[], None), 0);
+        assert_eq!(cheapest(&points, &[wrong], None), 0);
     }
 
     /// A line y = y0 as a live group.

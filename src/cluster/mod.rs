@@ -125,6 +125,13 @@ impl ClusterParams {
             ..self.clone()
         }
     }
+    /// The same parameters with k-means seeded by `seed`.
+    pub fn with_seed(&self, seed: u64) -> Self {
+        Self {
+            seed,
+            ..self.clone()
+        }
+    }
     /// The same parameters with K fixed at `k` (>= 1; every other field was validated).
     pub fn with_fixed_k(&self, k: usize) -> Result<Self, ClusterError> {
         if k == 0 {
