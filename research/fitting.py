@@ -1,6 +1,7 @@
 """What the scripts that fit against a running server share (imported, not run): one POST to
 /v1/fit, the error of an answer under the best one-to-one matching of groups (with -1 as the
-outliers' label, or not), and whether one true group was found."""
+outliers' label, or not), whether one true group was found, and the squared symmetric transfer
+distance of correspondences to an answered homography or affinity (numpy, imported there)."""
 import collections, itertools, json, urllib.request
 
 
@@ -37,3 +38,25 @@ def found(truth, labels, group):
     label, count = collections.Counter(l for l, t in zip(labels, truth) if t == group).most_common(1)[0]
     held = sum(1 for l in labels if l == label)
     return label != -1 and count >= 0.75 * n and held <= 1.25 * n
+
+
+def transfer(s, X):
+    """Squared symmetric transfer distance (mean of both directions) of every row of X
+    ([n, 4] numpy array, x1 y1 x2 y2) to structure s of an answer; inf for other types."""
+    import numpy as np
+    x1 = np.c_[X[:, :2], np.ones(len(X))]
+    x2 = np.c_[X[:, 2:], np.ones(len(X))]
+    if s["type"] == "homography":
+        H = np.array(s["params"]["h"]).reshape(3, 3)
+    elif s["type"] == "affine":
+        H = np.r_[np.array(s["params"]["a"]).reshape(2, 3), [[0, 0, 1]]]
+    else:
+        return np.full(len(X), np.inf)
+    try:
+        Hi = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        return np.full(len(X), np.inf)
+    p, q = x1 @ H.T, x2 @ Hi.T
+    with np.errstate(all="ignore"):
+        d = (((p[:, :2] / p[:, 2:] - X[:, 2:]) ** 2).sum(1) + ((q[:, :2] / q[:, 2:] - X[:, :2]) ** 2).sum(1)) / 2
+    return np.where(np.isfinite(d), d, np.inf)

@@ -13,6 +13,8 @@ import collections, json, sys
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+import fitting
+
 res = json.load(open(sys.argv[1]))
 
 
@@ -27,26 +29,6 @@ def err(pred, gt):
     return 1 - C[r, c].sum() / len(gt)
 
 
-def transfer(s, X):
-    """Squared symmetric transfer distance (mean of both directions) to structure s, per row."""
-    x1 = np.c_[X[:, :2], np.ones(len(X))]
-    x2 = np.c_[X[:, 2:], np.ones(len(X))]
-    if s["type"] == "homography":
-        H = np.array(s["params"]["h"]).reshape(3, 3)
-    elif s["type"] == "affine":
-        H = np.r_[np.array(s["params"]["a"]).reshape(2, 3), [[0, 0, 1]]]
-    else:
-        return np.full(len(X), np.inf)
-    try:
-        Hi = np.linalg.inv(H)
-    except np.linalg.LinAlgError:
-        return np.full(len(X), np.inf)
-    p, q = x1 @ H.T, x2 @ Hi.T
-    with np.errstate(all="ignore"):
-        d = (((p[:, :2] / p[:, 2:] - X[:, 2:]) ** 2).sum(1) + ((q[:, :2] / q[:, 2:] - X[:, :2]) ** 2).sum(1)) / 2
-    return np.where(np.isfinite(d), d, np.inf)
-
-
 def choose(r, lam, cost_out):
     X = np.array(r["points"], float)
     answers = [r[f"k{k}"] for k in range(1, 9)]
@@ -57,7 +39,7 @@ def choose(r, lam, cost_out):
         S = models(a)
         if not S:
             continue
-        R = np.min(np.stack([transfer(s, X) for s in S]), 0) / sigma ** 2
+        R = np.min(np.stack([fitting.transfer(s, X) for s in S]), 0) / sigma ** 2
         cost = np.minimum(R, cost_out).sum() + lam(len(X)) * len(S)
         if best is None or cost < best[0] - 1e-9:
             best = (cost, a)

@@ -7,33 +7,14 @@ reported against seed 0 alone. Needs a running server.
   python3 research/seed-choice.py PORT ORDERS_DIR
       ORDERS_DIR: shuffled copies from research/row-orders.py make (every s* under it is read)
 """
-import glob, itertools, json, sys
+import glob, json, sys
 
 import numpy as np
 
-sys.path.insert(0, "research")
-import fitting  # noqa: E402
+import fitting
 
 port, orders = sys.argv[1], sys.argv[2]
 dirs = ["../shared/datasets/adelaidermf"] + sorted(glob.glob(f"{orders}/s*"))
-
-
-def transfer(s, P):
-    """Symmetric transfer distance of every row of P to structure s (inf for other types)."""
-    if s["type"] == "homography":
-        H = np.array(s["params"]["h"]).reshape(3, 3)
-    elif s["type"] == "affine":
-        H = np.vstack([np.array(s["params"]["a"]).reshape(2, 3), [0, 0, 1]])
-    else:
-        return np.full(len(P), np.inf)
-    try:
-        Hi = np.linalg.inv(H)
-    except np.linalg.LinAlgError:
-        return np.full(len(P), np.inf)
-    x1, x2 = np.c_[P[:, :2], np.ones(len(P))], np.c_[P[:, 2:], np.ones(len(P))]
-    a, b = x1 @ H.T, x2 @ Hi.T
-    a, b = a[:, :2] / a[:, 2:], b[:, :2] / b[:, 2:]
-    return np.sqrt((((a - P[:, 2:]) ** 2).sum(1) + ((b - P[:, :2]) ** 2).sum(1)) / 2)
 
 
 answers = []  # per (pair, order): [(error, distances, median rms, structures)] for seeds 0..3
@@ -50,7 +31,7 @@ for path in sorted(glob.glob(dirs[0] + "/*.json")):
             r = fitting.post(port, {"kind": "correspondences", "model": "adelaide-homography",
                                     "k": k, "points": f["points"], "image_size": f["image_size"],
                                     "seed": seed})
-            dist = np.stack([transfer(s, P) for s in r["structures"]] or [np.full(len(P), np.inf)])
+            dist = np.sqrt(np.stack([fitting.transfer(s, P) for s in r["structures"]] or [np.full(len(P), np.inf)]))
             dmin = np.nan_to_num(dist.min(0), nan=1e9, posinf=1e9)
             err = fitting.error(f["labels"], [max(l, -1) for l in r["labels"]])
             rms = np.median([s["rms"] for s in r["structures"]]) if r["structures"] else np.inf
