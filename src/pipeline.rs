@@ -571,13 +571,16 @@ pub const SEEDED_MAX_ROWS: usize = 500;
 pub const EXTRA_SEEDS: u64 = 3;
 
 /// [`refine`] of `clustering` (k-means of `embedding` with `params`' seed). On sets of curves
-/// whose refinement fits at most [`SEEDED_MAX_ROWS`] rows, k-means also
-/// clusters `embedding` at the same K from [`EXTRA_SEEDS`] more seeds, each partition not seen
-/// yet is refined too, and the answer is the first of least truncated cost
+/// whose refinement fits at most [`SEEDED_MAX_ROWS`] rows (rows set apart as far not counted),
+/// k-means also clusters `embedding` at the same K from [`EXTRA_SEEDS`] more seeds derived from
+/// `params`' (a seed whose clustering fails is skipped), each partition not seen yet is refined
+/// as `clustering` is (its selection and scores, so a chosen K may still merge or grow), and the
+/// answer is the first of least truncated cost among those with as many structures as the first
 /// ([`refine::cheapest`]). A few sets hold partitions of near-equal k-means residual that
 /// refinement takes to different answers, and the seed alone picks one; the cost of the
-/// structures on every row tells them apart. The clustering's K, residual curve and scores are
-/// those of `clustering` whichever partition the answer came from.
+/// structures on every row tells them apart. The answer stays a function of the input and the
+/// seed. The clustering's K, residual curve and scores are those of `clustering` whichever
+/// partition the answer came from. -> labels `[n]` (−1 for outliers) and the structures.
 pub fn refine_seeded(
     model: &LoadedModel,
     rows: &RefineRows,
@@ -585,10 +588,10 @@ pub fn refine_seeded(
     params: &ClusterParams,
     clustering: &Clustering,
     r: &RefineParams,
-) -> Result<Refined, FitError> {
+) -> Refined {
     let first = refine(model, rows, clustering, r);
     if rows.count() > SEEDED_MAX_ROWS || model.card.family() != geometry::Family::Curves {
-        return Ok(first);
+        return first;
     }
     let mut seen = vec![first_seen(&clustering.labels)];
     let mut answers = vec![first];
@@ -596,11 +599,14 @@ pub fn refine_seeded(
         let seed = params
             .seed()
             .wrapping_add(i.wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        let mut other = cluster(
-            model,
-            embedding,
-            &params.with_fixed_k(clustering.k)?.with_seed(seed),
-        )?;
+        // The search is optional: a seed whose clustering fails is skipped, not the fit.
+        let Ok(mut other) = params
+            .with_fixed_k(clustering.k)
+            .map_err(FitError::from)
+            .and_then(|p| cluster(model, embedding, &p.with_seed(seed)))
+        else {
+            continue;
+        };
         // Refined as `clustering` is: a chosen K may still merge or grow.
         other.selection = clustering.selection;
         other.scores = clustering.scores.clone();
@@ -612,7 +618,7 @@ pub fn refine_seeded(
         answers.push(refine(model, rows, &other, r));
     }
     let best = refine::cheapest(rows.points, &answers, r.threshold);
-    Ok(answers.swap_remove(best))
+    answers.swap_remove(best)
 }
 
 /// Labels renumbered in order of first appearance: equal for two labellings of one partition.
@@ -652,7 +658,7 @@ pub fn refine_chosen(
         || model.card.family() == geometry::Family::Subspace
         || k + 1 > considered.min(read)
     {
-        let refined = refine_seeded(model, &rows, embedding, params, clustering, r)?;
+        let refined = refine_seeded(model, &rows, embedding, params, clustering, r);
         return Ok((clustering.clone(), refined));
     }
     let wider = one_more_group(model, embedding, params, clustering)?;
@@ -660,7 +666,6 @@ pub fn refine_chosen(
         || refine_seeded(model, &rows, embedding, params, clustering, r),
         || refine_seeded(model, &rows, embedding, params, &wider, r),
     );
-    let (refined, again) = (refined?, again?);
     if !refine::splits_pooled(&refined, &again, points.len()) {
         return Ok((clustering.clone(), refined));
     }
@@ -670,7 +675,7 @@ pub fn refine_chosen(
             return Ok(None);
         }
         let next = one_more_group(model, embedding, params, from)?;
-        let answer = refine_seeded(model, &rows, embedding, params, &next, r)?;
+        let answer = refine_seeded(model, &rows, embedding, params, &next, r);
         Ok(Some((both_ks(from, next), answer)))
     })
 }
@@ -804,11 +809,10 @@ fn fit_counting(
                     let rows = RefineRows::new(points, &embedding.far);
                     let seeded =
                         |c: &Clustering| refine_seeded(model, &rows, &embedding, params, c, r);
-                    let ((refined, again), other) = pool.join(
+                    let ((mut refined, again), other) = pool.join(
                         || pool.join(|| seeded(&clustering), || wider.as_ref().map(seeded)),
                         || seeded(&chosen),
                     );
-                    let (mut refined, again, other) = (refined?, again.transpose()?, other?);
                     // Refinement dissolves the outlier group into -1 labels, so the k + 1
                     // clustering is refined too, and its answer is kept when it has no more
                     // than k structures and no fewer than the k clustering's. (Refining it only
@@ -1742,15 +1746,18 @@ pub(crate) mod tests {
         let cost = |points: &PointSet, answer: &Refined| {
             crate::refine::truncated_cost(points, &answer.structures, 0.1)
         };
-        for (per, seeded_search) in [(40, true), (200, false)] {
+        let chosen = ClusterParams::builder().k_max(6).build().unwrap();
+        for (per, seeded_search, params) in [
+            (40, true, fixed(3)),
+            (40, true, chosen.clone()),
+            (200, false, fixed(3)),
+        ] {
             let points = two_circles_and_a_line(per);
             let embedding = embed(&model, &points, None, &[], 0).unwrap();
-            let params = fixed(3);
             let clustering = cluster(&model, &embedding, &params).unwrap();
             let rows = RefineRows::new(&points, &embedding.far);
             let first = refine(&model, &rows, &clustering, &r);
-            let answer =
-                refine_seeded(&model, &rows, &embedding, &params, &clustering, &r).unwrap();
+            let answer = refine_seeded(&model, &rows, &embedding, &params, &clustering, &r);
             assert_eq!(answer.labels.len(), points.len());
             if seeded_search {
                 assert!(cost(&points, &answer) <= cost(&points, &first));
