@@ -20,10 +20,10 @@
 //!    With K chosen, the k + 1 clustering is refined too and answers where it parts structures
 //!    that pooled two, and from it the k + 2 one, and so on ([`refine_chosen`]); with a k given, where the outliers take a group of
 //!    their own, and the clustering K chosen would give answers where its k structures are far
-//!    less noisy ([`crate::refine::replaces_given`]). A small set of curves (at most
-//!    [`SEEDED_MAX_ROWS`] rows) is also clustered from more k-means seeds at the same K, and the
-//!    answer whose structures explain the rows at the least truncated cost is kept
-//!    ([`refine_seeded`]).
+//!    less noisy ([`crate::refine::replaces_given`]). A small set of curves, or of
+//!    correspondences given k (at most [`SEEDED_MAX_ROWS`] rows), is also clustered from more
+//!    k-means seeds at the same K, and the answer whose structures explain the rows at the least
+//!    truncated cost is kept ([`refine_seeded`]).
 //! 6. **answer** ([`FitOutcome`]): labels, K, structures, the residual curve and the stage
 //!    timings.
 
@@ -570,8 +570,11 @@ pub const SEEDED_MAX_ROWS: usize = 500;
 /// The k-means seeds [`refine_seeded`] tries beyond the request's.
 pub const EXTRA_SEEDS: u64 = 3;
 
-/// [`refine`] of `clustering` (k-means of `embedding` with `params`' seed). On sets of curves
-/// whose refinement fits at most [`SEEDED_MAX_ROWS`] rows (rows set apart as far not counted),
+/// [`refine`] of `clustering` (k-means of `embedding` with `params`' seed). On sets of curves,
+/// and of correspondences where the caller gave k (`k_given`: the number of structures is
+/// fixed, so the seeds' answers differ only in which structures; with K chosen the split test
+/// compares answers' noise, and a search there moved K on sparse pairs), whose refinement fits
+/// at most [`SEEDED_MAX_ROWS`] rows (rows set apart as far not counted),
 /// k-means also clusters `embedding` at the same K from [`EXTRA_SEEDS`] more seeds derived from
 /// `params`' (a seed whose clustering fails is skipped), each partition not seen yet is refined
 /// as `clustering` is (its selection and scores, so a chosen K may still merge or grow), and the
@@ -588,9 +591,15 @@ pub fn refine_seeded(
     params: &ClusterParams,
     clustering: &Clustering,
     r: &RefineParams,
+    k_given: bool,
 ) -> Refined {
     let first = refine(model, rows, clustering, r);
-    if rows.count() > SEEDED_MAX_ROWS || model.card.family() != geometry::Family::Curves {
+    let searched = match model.card.family() {
+        geometry::Family::Curves => true,
+        geometry::Family::Subspace => false,
+        _ => k_given,
+    };
+    if !searched || rows.count() > SEEDED_MAX_ROWS {
         return first;
     }
     let mut seen = vec![first_seen(&clustering.labels)];
@@ -658,13 +667,13 @@ pub fn refine_chosen(
         || model.card.family() == geometry::Family::Subspace
         || k + 1 > considered.min(read)
     {
-        let refined = refine_seeded(model, &rows, embedding, params, clustering, r);
+        let refined = refine_seeded(model, &rows, embedding, params, clustering, r, false);
         return Ok((clustering.clone(), refined));
     }
     let wider = one_more_group(model, embedding, params, clustering)?;
     let (refined, again) = model.pool().join(
-        || refine_seeded(model, &rows, embedding, params, clustering, r),
-        || refine_seeded(model, &rows, embedding, params, &wider, r),
+        || refine_seeded(model, &rows, embedding, params, clustering, r, false),
+        || refine_seeded(model, &rows, embedding, params, &wider, r, false),
     );
     if !refine::splits_pooled(&refined, &again, points.len()) {
         return Ok((clustering.clone(), refined));
@@ -675,7 +684,7 @@ pub fn refine_chosen(
             return Ok(None);
         }
         let next = one_more_group(model, embedding, params, from)?;
-        let answer = refine_seeded(model, &rows, embedding, params, &next, r);
+        let answer = refine_seeded(model, &rows, embedding, params, &next, r, false);
         Ok(Some((both_ks(from, next), answer)))
     })
 }
@@ -807,8 +816,9 @@ fn fit_counting(
                     let chosen = cluster(model, &embedding, &auto)?;
                     let pool = model.pool();
                     let rows = RefineRows::new(points, &embedding.far);
-                    let seeded =
-                        |c: &Clustering| refine_seeded(model, &rows, &embedding, params, c, r);
+                    let seeded = |c: &Clustering| {
+                        refine_seeded(model, &rows, &embedding, params, c, r, true)
+                    };
                     let ((mut refined, again), other) = pool.join(
                         || pool.join(|| seeded(&clustering), || wider.as_ref().map(seeded)),
                         || seeded(&chosen),
@@ -1757,7 +1767,7 @@ pub(crate) mod tests {
             let clustering = cluster(&model, &embedding, &params).unwrap();
             let rows = RefineRows::new(&points, &embedding.far);
             let first = refine(&model, &rows, &clustering, &r);
-            let answer = refine_seeded(&model, &rows, &embedding, &params, &clustering, &r);
+            let answer = refine_seeded(&model, &rows, &embedding, &params, &clustering, &r, false);
             assert_eq!(answer.labels.len(), points.len());
             if seeded_search {
                 assert!(cost(&points, &answer) <= cost(&points, &first));
@@ -1771,6 +1781,40 @@ pub(crate) mod tests {
                 assert_eq!(answer, first);
             }
         }
+    }
+
+    #[test]
+    fn correspondences_search_seeds_only_where_the_caller_gave_k() {
+        use crate::registry::tests::tiny_model;
+        let model = tiny_model("pairs", Kind::Correspondences, 4, 3);
+        // Two motions of 30 pairs each over a 100 x 100 image: a shift and a zoom.
+        let values: Vec<f64> = (0..60)
+            .flat_map(|i| {
+                let (x, y) = ((i * 37 % 97) as f64, (i * 53 % 89) as f64);
+                if i % 2 == 0 {
+                    [x, y, x + 3.0, y - 2.0]
+                } else {
+                    [x, y, 1.5 * x - 10.0, 1.5 * y - 5.0]
+                }
+            })
+            .collect();
+        let points = PointSet::from_flat(Kind::Correspondences, 4, values).unwrap();
+        let embedding = embed(&model, &points, None, &[], 0).unwrap();
+        let params = fixed(2);
+        let clustering = cluster(&model, &embedding, &params).unwrap();
+        let rows = RefineRows::new(&points, &embedding.far);
+        // A threshold of the caller's: the cost below is then the one the search compares.
+        let r = RefineParams {
+            threshold: Some(1.0),
+            ..RefineParams::default()
+        };
+        let first = refine(&model, &rows, &clustering, &r);
+        let unsearched = refine_seeded(&model, &rows, &embedding, &params, &clustering, &r, false);
+        assert_eq!(unsearched, first);
+        let searched = refine_seeded(&model, &rows, &embedding, &params, &clustering, &r, true);
+        assert_eq!(searched.labels.len(), points.len());
+        let cost = |a: &Refined| crate::refine::truncated_cost(&points, &a.structures, 1.0);
+        assert!(cost(&searched) <= cost(&first));
     }
 
     #[test]
