@@ -55,6 +55,32 @@ fn gen_lce_writes_readable_samples() {
 }
 
 #[test]
+fn a_reader_that_leaves_early_ends_the_output_without_a_panic() {
+    // `multifit-train eval ... | head -n 0`: the reader is gone when the output comes.
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_multifit-train"))
+        .args([
+            "eval",
+            "--model",
+            "models/lce",
+            "--data",
+            "lce:mixed,count=30,seed=1,scale=2",
+            "--k-max",
+            "6",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The reading end is closed before the table is written (the evaluation takes a while).
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{:?}: {stderr}", out.status);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
 fn overlapping_clips_and_symmetries_multiply_the_training_set() {
     let names = ["Seq028_Clip02", "Seq070_Clip01"];
     let data = subset("kt-sym", "kt3dmoseg", &names);

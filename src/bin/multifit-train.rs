@@ -225,8 +225,12 @@ struct CvCmd {
     json: bool,
 }
 
-fn run(command: Command) -> Result<()> {
-    match command {
+/// Runs one command -> what it prints on standard output.
+fn run(command: Command) -> Result<String> {
+    fn line(text: impl std::fmt::Display) -> String {
+        format!("{text}\n")
+    }
+    Ok(match command {
         Command::GenLce(a) => {
             let (points_per_shape, points_max) = gen_lce::points_per_shape(&a.points_per_shape)?;
             let config = LceConfig {
@@ -244,11 +248,11 @@ fn run(command: Command) -> Result<()> {
                 seed: a.seed,
                 config,
             };
-            println!("{}", gen_lce::write(&spec, &a.out)?);
+            line(gen_lce::write(&spec, &a.out)?)
         }
-        Command::GenMotion(job) => println!("{}", job.run()?),
-        Command::GenTwoview(job) => println!("{}", job.run()?),
-        Command::Train(job) => println!("{}", train::run(&job, &STOP)?),
+        Command::GenMotion(job) => line(job.run()?),
+        Command::GenTwoview(job) => line(job.run()?),
+        Command::Train(job) => line(train::run(&job, &STOP)?),
         Command::Eval(a) => {
             let job = eval::EvalJob {
                 model: a.model,
@@ -268,23 +272,16 @@ fn run(command: Command) -> Result<()> {
                 refine_from_truth: a.refine_from_truth,
             };
             let evaluated = eval::run(&job)?;
-            print!("{}", evaluated.output(a.json)?);
+            let output = evaluated.output(a.json)?;
             evaluated.record()?;
+            output
         }
-        Command::Cv(a) => {
-            if let Some(summary) = cv::run(&a.job, &STOP)? {
-                print!("{}", summary.output(a.json)?);
-            }
-        }
-        Command::Ensemble(a) => {
-            println!("{}", ensemble::run(&a.models, &a.out, a.name.as_deref())?);
-        }
-        Command::Sparse(a) => {
-            println!(
-                "{}",
-                ensemble::run_sparse(&a.model, &a.network, a.above, &a.out)?
-            );
-        }
+        Command::Cv(a) => match cv::run(&a.job, &STOP)? {
+            Some(summary) => summary.output(a.json)?,
+            None => String::new(),
+        },
+        Command::Ensemble(a) => line(ensemble::run(&a.models, &a.out, a.name.as_deref())?),
+        Command::Sparse(a) => line(ensemble::run_sparse(&a.model, &a.network, a.above, &a.out)?),
         Command::Robustness(a) => {
             let settings = GridSettings {
                 sets: a.sets,
@@ -297,13 +294,30 @@ fn run(command: Command) -> Result<()> {
                 model_type: a.model_type,
                 hypotheses: a.hypotheses != Some(Switch::Off),
             };
-            println!(
-                "{}",
-                robustness::run(&a.model, a.folds.as_deref(), &settings, &a.out)?
-            );
+            line(robustness::run(
+                &a.model,
+                a.folds.as_deref(),
+                &settings,
+                &a.out,
+            )?)
+        }
+    })
+}
+
+/// Writes a command's output; a reader that went away (`| head`) ends the output quietly, as
+/// it does for other command-line tools, instead of a panic. -> whether every byte was written
+/// or the reader left.
+fn emit(text: &str) -> bool {
+    use std::io::{ErrorKind, Write};
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Ok(()) => true,
+        Err(e) if e.kind() == ErrorKind::BrokenPipe => true,
+        Err(e) => {
+            eprintln!("error: writing the output: {e}");
+            false
         }
     }
-    Ok(())
 }
 
 fn main() -> ExitCode {
@@ -315,7 +329,8 @@ fn main() -> ExitCode {
         eprintln!("stopping after the current step (Ctrl-C again to quit at once)");
     });
     match run(cli.command) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(text) if emit(&text) => ExitCode::SUCCESS,
+        Ok(_) => ExitCode::FAILURE,
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE
