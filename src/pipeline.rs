@@ -602,44 +602,31 @@ pub fn refine_seeded(
     if !searched || rows.count() > SEEDED_MAX_ROWS {
         return first;
     }
-    let mut seen = vec![first_seen(&clustering.labels)];
+    let Ok(fixed) = params.with_fixed_k(clustering.k) else {
+        return first;
+    };
+    // Clusterings number their groups by first appearance, so one partition has one labelling.
+    let mut seen = vec![clustering.labels.clone()];
     let mut answers = vec![first];
     for i in 1..=EXTRA_SEEDS {
         let seed = params
             .seed()
             .wrapping_add(i.wrapping_mul(0x9E37_79B9_7F4A_7C15));
         // The search is optional: a seed whose clustering fails is skipped, not the fit.
-        let Ok(mut other) = params
-            .with_fixed_k(clustering.k)
-            .map_err(FitError::from)
-            .and_then(|p| cluster(model, embedding, &p.with_seed(seed)))
-        else {
+        let Ok(mut other) = cluster(model, embedding, &fixed.with_seed(seed)) else {
             continue;
         };
+        if seen.contains(&other.labels) {
+            continue;
+        }
+        seen.push(other.labels.clone());
         // Refined as `clustering` is: a chosen K may still merge or grow.
         other.selection = clustering.selection;
         other.scores = clustering.scores.clone();
-        let partition = first_seen(&other.labels);
-        if seen.contains(&partition) {
-            continue;
-        }
-        seen.push(partition);
         answers.push(refine(model, rows, &other, r));
     }
     let best = refine::cheapest(rows.points, &answers, r.threshold);
     answers.swap_remove(best)
-}
-
-/// Labels renumbered in order of first appearance: equal for two labellings of one partition.
-fn first_seen(labels: &[usize]) -> Vec<usize> {
-    let mut map = BTreeMap::new();
-    labels
-        .iter()
-        .map(|&l| {
-            let next = map.len();
-            *map.entry(l).or_insert(next)
-        })
-        .collect()
 }
 
 /// Stage 5 with K chosen automatically: the clustering refined, and the k + 1 clustering
@@ -1815,14 +1802,6 @@ pub(crate) mod tests {
         assert_eq!(searched.labels.len(), points.len());
         let cost = |a: &Refined| crate::refine::truncated_cost(&points, &a.structures, 1.0);
         assert!(cost(&searched) <= cost(&first));
-    }
-
-    #[test]
-    fn labellings_of_one_partition_are_renumbered_alike() {
-        assert_eq!(first_seen(&[2, 2, 0, 1, 0]), vec![0, 0, 1, 2, 1]);
-        assert_eq!(first_seen(&[1, 1, 2, 0, 2]), first_seen(&[2, 2, 0, 1, 0]));
-        assert_ne!(first_seen(&[0, 1, 1]), first_seen(&[0, 0, 1]));
-        assert!(first_seen(&[]).is_empty());
     }
 
     #[test]

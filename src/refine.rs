@@ -265,8 +265,9 @@ fn far_quieter(base: &Refined, other: &Refined, more_outliers: f64) -> bool {
 }
 
 /// How well `structures` explain the rows of `points`: Σ_i min(d_i², τ²), d_i the row's
-/// smallest residual among them (caller's units). A row no structure explains within τ costs
-/// τ², as an outlier does, so an answer cannot lower its cost by leaving rows out.
+/// smallest residual among them (caller's units), the cost the hypotheses stage lowers swap by
+/// swap on its seen rows ([`hypotheses`]). A row no structure explains within τ costs τ², as an
+/// outlier does, so an answer cannot lower its cost by leaving rows out.
 pub fn truncated_cost(points: &PointSet, structures: &[Structure], tau: f64) -> f64 {
     let prepared: Vec<_> = structures.iter().map(|s| s.model.prepared()).collect();
     (0..points.len())
