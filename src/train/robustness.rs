@@ -688,6 +688,85 @@ pub fn rescale_second_view(seq: &Sequence, factor: f64) -> Sequence {
     }
 }
 
+/// How a pair's two images are presented to the fit, beside how the files give them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum ViewChange {
+    /// As the files give them.
+    AsSent,
+    /// The second image first: rows `[x2, y2, x1, y1]`.
+    Swapped,
+    /// `y` measured upwards from the bottom edge of each image: `y -> h - y`.
+    YFlipped,
+    /// Both images turned a quarter turn clockwise: `(x, y) -> (h - y, x)`, size `w x h -> h x w`.
+    QuarterTurn,
+}
+
+impl ViewChange {
+    fn describe(self) -> &'static str {
+        match self {
+            ViewChange::AsSent => "as sent",
+            ViewChange::Swapped => "swapped",
+            ViewChange::YFlipped => "y flipped",
+            ViewChange::QuarterTurn => "quarter turn",
+        }
+    }
+
+    /// `seq` as presented; labels and row order unchanged. Without an image size the bounding
+    /// box of each view's points stands for its image.
+    fn apply(self, seq: &Sequence) -> Sequence {
+        let dim = seq.points.dim();
+        let views = dim / 2;
+        let height = |v: usize| match seq.image_size {
+            Some(size) => size.view(v)[1],
+            None => (0..seq.points.len())
+                .map(|i| seq.points.row(i)[2 * v + 1])
+                .fold(0.0, f64::max),
+        };
+        let heights: Vec<f64> = (0..views).map(height).collect();
+        let values: Vec<f64> = match self {
+            ViewChange::AsSent => return seq.clone(),
+            ViewChange::Swapped => {
+                let swapped = crate::data::Symmetry::Reverse.apply_points(&seq.points, None);
+                return Sequence {
+                    points: swapped.expect("correspondences have two views"),
+                    image_size: seq.image_size.map(|s| {
+                        ImageSize::per_view(s.view(1), s.view(0)).expect("valid sizes")
+                    }),
+                    ..seq.clone()
+                };
+            }
+            ViewChange::YFlipped => seq
+                .points
+                .values()
+                .chunks_exact(2)
+                .enumerate()
+                .flat_map(|(j, p)| [p[0], heights[j % views] - p[1]])
+                .collect(),
+            ViewChange::QuarterTurn => seq
+                .points
+                .values()
+                .chunks_exact(2)
+                .enumerate()
+                .flat_map(|(j, p)| [heights[j % views] - p[1], p[0]])
+                .collect(),
+        };
+        let points = PointSet::from_flat(seq.points.kind(), dim, values).expect("finite values");
+        let image_size = match (self, seq.image_size) {
+            (ViewChange::QuarterTurn, Some(s)) => {
+                let [w1, h1] = s.view(0);
+                let [w2, h2] = s.view(1);
+                Some(ImageSize::per_view([h1, w1], [h2, w2]).expect("valid sizes"))
+            }
+            (_, size) => size,
+        };
+        Sequence {
+            points,
+            image_size,
+            ..seq.clone()
+        }
+    }
+}
+
 /// A sample named after its sequence and what was done to it.
 fn named(seq: &Sequence, what: &str) -> (String, Sample) {
     let mut sample = seq.sample();
@@ -710,6 +789,7 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
         "second image scale",
         "whole pixels",
         "rows shuffled",
+        "views",
     ]
     .map(String::from)
     .to_vec();
@@ -732,6 +812,8 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
         whole: bool,
         /// Rows in a random order.
         shuffled: bool,
+        /// How the two images are presented.
+        view: ViewChange,
     }
     const AS_IS: Spec = Spec {
         name: "as-is",
@@ -742,6 +824,7 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
         second: 1.0,
         whole: false,
         shuffled: false,
+        view: ViewChange::AsSent,
     };
     let specs = [
         AS_IS,
@@ -795,6 +878,21 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
             shuffled: true,
             ..AS_IS
         },
+        Spec {
+            name: "views-swapped",
+            view: ViewChange::Swapped,
+            ..AS_IS
+        },
+        Spec {
+            name: "y-flipped",
+            view: ViewChange::YFlipped,
+            ..AS_IS
+        },
+        Spec {
+            name: "quarter-turn",
+            view: ViewChange::QuarterTurn,
+            ..AS_IS
+        },
     ];
     let builders = specs
         .into_iter()
@@ -808,6 +906,7 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
                 second,
                 whole,
                 shuffled,
+                view,
             } = spec;
             let seqs = seqs.clone();
             let source = source.clone();
@@ -826,7 +925,10 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
                         if whole {
                             changed = whole_pixels(&changed);
                         }
-                        let what = if whole {
+                        changed = view.apply(&changed);
+                        let what = if view != ViewChange::AsSent {
+                            view.describe().to_string()
+                        } else if whole {
                             "whole pixels".to_string()
                         } else if second != 1.0 {
                             format!("second image x{second}")
@@ -880,6 +982,7 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
                         ("second image scale", json!(second)),
                         ("whole pixels", json!(whole)),
                         ("rows shuffled", json!(shuffled)),
+                        ("views", json!(view.describe())),
                     ]),
                     data,
                     samples,
@@ -893,6 +996,7 @@ fn correspondence_grid(s: &GridSettings, seqs: Vec<Sequence>, model_type: &str) 
         "Known K counts the gross outliers as one group (AdelaideRMF's label 0), so K is the number of structures plus one wherever a pair has outliers.".to_string(),
         "Rescaling multiplies the coordinates and the image size together; the image-frame normalisation divides one by the other, so those cells test that invariance (by a power of two it is exact in floating point).".to_string(),
         "The rows-shuffled cell sends each pair's rows in a random order (the order the pairs' files list them in groups many points of one structure together): the same sets, which a fit should answer alike in any order.".to_string(),
+        "The views-swapped cell sends each pair with its two images in the other order, the y-flipped cell with y measured upwards from the bottom of each image, the quarter-turn cell with both images turned a quarter turn clockwise (a portrait photo of a landscape scene; the image size sent turns too): the same scenes, as other tools and cameras report them.".to_string(),
         "The whole-pixels cell rounds every coordinate to the nearest whole pixel, as trackers and annotation tools that report integer pixels do: about 0.29 px of uniform noise more per coordinate.".to_string(),
         "The second-image cells give the second view another resolution (a second camera) and send each image's size, [[w, h], [w2, h2]]: the fit reads and refines the second view in the first image's frame, and answers its structures in each image's own pixels. Scored by labels, these cells check that a second camera answers as one camera would, up to rounding.".to_string(),
     ];
@@ -1104,6 +1208,36 @@ mod tests {
     use super::*;
 
     use crate::data::dataset::tests::pair;
+
+    #[test]
+    fn views_are_presented_swapped_flipped_and_turned_as_documented() {
+        let seq = pair();
+        let [w, h] = seq.image_size.unwrap().view(0);
+        let swapped = ViewChange::Swapped.apply(&seq);
+        let flipped = ViewChange::YFlipped.apply(&seq);
+        let turned = ViewChange::QuarterTurn.apply(&seq);
+        for i in 0..seq.points.len() {
+            let r = seq.points.row(i);
+            assert_eq!(swapped.points.row(i), &[r[2], r[3], r[0], r[1]]);
+            assert_eq!(flipped.points.row(i), &[r[0], h - r[1], r[2], h - r[3]]);
+            assert_eq!(turned.points.row(i), &[h - r[1], r[0], h - r[3], r[2]]);
+        }
+        assert_eq!(turned.image_size.unwrap().view(1), [h, w]);
+        assert_eq!(flipped.image_size, seq.image_size);
+        // Flipping twice and turning four times give the pair back; labels never move.
+        let back = ViewChange::YFlipped.apply(&flipped);
+        assert_eq!(back.points.values(), seq.points.values());
+        let mut round = seq.clone();
+        for _ in 0..4 {
+            round = ViewChange::QuarterTurn.apply(&round);
+        }
+        assert_eq!(round.points.values(), seq.points.values());
+        assert_eq!(round.image_size, seq.image_size);
+        for changed in [&swapped, &flipped, &turned] {
+            assert_eq!(changed.labels, seq.labels);
+        }
+        assert_eq!(ViewChange::AsSent.apply(&seq).points.values(), seq.points.values());
+    }
 
     #[test]
     fn shuffling_keeps_every_row_with_its_label_in_a_seeded_order() {
