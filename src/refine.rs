@@ -53,7 +53,8 @@
 //! learned group, their pooled fit sets a noise level under which both fit, so neither the
 //! rounds nor the hypotheses part them. With K chosen the fit also refines the k + 1
 //! clustering ([`crate::pipeline::refine_chosen`]) and keeps that answer when it has at least as
-//! many structures, a noise level ([`Refined::noise`]) at most half the k answer's, and at most
+//! many structures, a noise level ([`Refined::noise`]) at most 1 / 1.7 of the k answer's
+//! ([`SPLIT_NOISE_FACTOR`]), and at most
 //! 5 % of the points more as outliers; from an answer so kept it goes on to the k + 2
 //! clustering under the same test, and so on ([`split_while_pooled`]). On the AdelaideRMF
 //! homography folds SOD's K was right on 52.9 % of the pairs without it, 82.4 % with it, and
@@ -201,8 +202,13 @@ impl Refined {
     }
 }
 
-/// How much lower the k + 1 answer's noise must be for it to be kept over the k answer.
-pub const SPLIT_NOISE_FACTOR: f64 = 2.0;
+/// How much lower the k + 1 answer's noise must be for it to be kept over the k answer. A noise
+/// floor shared by every structure (pixels rounded to whole values, a sparse set's fits)
+/// pulls the ratio of two answers' noise towards 1: at 2 such sets kept K too low.
+pub const SPLIT_NOISE_FACTOR: f64 = 1.7;
+/// How much lower the noise of the answer K chosen would give must be for it to replace the
+/// answer refined from the caller's k clusters ([`replaces_given`]).
+pub const GIVEN_NOISE_FACTOR: f64 = 2.0;
 /// The most outliers, as a share of the points, that the k + 1 answer may flag beyond the k
 /// answer's.
 pub const SPLIT_MORE_OUTLIERS: f64 = 0.05;
@@ -219,7 +225,12 @@ pub const GIVEN_MORE_OUTLIERS: f64 = 0.2;
 pub fn replaces_given(given: &Refined, chosen: &Refined, k: usize, n: usize) -> bool {
     chosen.structures.len() == k
         && chosen.measured().count() == k
-        && far_quieter(given, chosen, GIVEN_MORE_OUTLIERS * n as f64)
+        && far_quieter(
+            given,
+            chosen,
+            GIVEN_NOISE_FACTOR,
+            GIVEN_MORE_OUTLIERS * n as f64,
+        )
 }
 
 /// Whether `wider` (refined from one more cluster) splits a structure that `answer` pooled: it
@@ -232,7 +243,12 @@ pub fn replaces_given(given: &Refined, chosen: &Refined, k: usize, n: usize) -> 
 /// split in two is dissolved again, so neither passes.
 pub fn splits_pooled(answer: &Refined, wider: &Refined, n: usize) -> bool {
     wider.measured().count() >= answer.measured().count()
-        && far_quieter(answer, wider, SPLIT_MORE_OUTLIERS * n as f64)
+        && far_quieter(
+            answer,
+            wider,
+            SPLIT_NOISE_FACTOR,
+            SPLIT_MORE_OUTLIERS * n as f64,
+        )
 }
 
 /// From `start` (a clustering's answer that split one with a group fewer), one group more at a
@@ -255,12 +271,11 @@ pub fn split_while_pooled<C, E>(
     Ok(at)
 }
 
-/// Whether `other`'s noise ([`Refined::noise`]) is finite and at most 1 /
-/// [`SPLIT_NOISE_FACTOR`] of `base`'s, while it flags at most `more_outliers` points more as
-/// outliers than `base`.
-fn far_quieter(base: &Refined, other: &Refined, more_outliers: f64) -> bool {
+/// Whether `other`'s noise ([`Refined::noise`]) is finite and at most 1 / `factor` of
+/// `base`'s, while it flags at most `more_outliers` points more as outliers than `base`.
+fn far_quieter(base: &Refined, other: &Refined, factor: f64, more_outliers: f64) -> bool {
     other.noise().is_finite()
-        && other.noise() * SPLIT_NOISE_FACTOR <= base.noise()
+        && other.noise() * factor <= base.noise()
         && other.outliers() as f64 <= base.outliers() as f64 + more_outliers
 }
 
@@ -1379,6 +1394,37 @@ mod tests {
         let mut bare = answer(&[1.0, 1.2, 0.9], 3);
         bare.structures[2].inliers = 3;
         assert!(!replaces_given(&given, &bare, 3, 200));
+    }
+
+    #[test]
+    fn a_split_asks_less_quiet_than_a_replaced_k() {
+        let structure = |rms: f64| Structure {
+            label: 0,
+            model: Model::Circle {
+                cx: 0.0,
+                cy: 0.0,
+                r: 1.0,
+            },
+            inliers: 50,
+            rms,
+        };
+        let answer = |rms: &[f64]| Refined {
+            labels: vec![-1; 2],
+            structures: rms.iter().map(|&r| structure(r)).collect(),
+            sigma: 1.0,
+        };
+        let base = answer(&[9.0, 9.0]);
+        // 1.8 times quieter: a split (factor 1.7), not a replacement of a given k (factor 2).
+        let quieter = answer(&[5.0, 5.0]);
+        assert!(splits_pooled(&base, &quieter, 200));
+        assert!(!replaces_given(&base, &quieter, 2, 200));
+        // 1.6 times quieter: neither.
+        let barely = answer(&[9.0 / 1.6, 9.0 / 1.6]);
+        assert!(!splits_pooled(&base, &barely, 200));
+        // 2.25 times quieter: both.
+        let far = answer(&[4.0, 4.0]);
+        assert!(splits_pooled(&base, &far, 200));
+        assert!(replaces_given(&base, &far, 2, 200));
     }
 
     #[test]

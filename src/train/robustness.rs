@@ -729,9 +729,9 @@ impl ViewChange {
                 let swapped = crate::data::Symmetry::Reverse.apply_points(&seq.points, None);
                 return Sequence {
                     points: swapped.expect("correspondences have two views"),
-                    image_size: seq.image_size.map(|s| {
-                        ImageSize::per_view(s.view(1), s.view(0)).expect("valid sizes")
-                    }),
+                    image_size: seq
+                        .image_size
+                        .map(|s| ImageSize::per_view(s.view(1), s.view(0)).expect("valid sizes")),
                     ..seq.clone()
                 };
             }
@@ -1236,7 +1236,10 @@ mod tests {
         for changed in [&swapped, &flipped, &turned] {
             assert_eq!(changed.labels, seq.labels);
         }
-        assert_eq!(ViewChange::AsSent.apply(&seq).points.values(), seq.points.values());
+        assert_eq!(
+            ViewChange::AsSent.apply(&seq).points.values(),
+            seq.points.values()
+        );
     }
 
     #[test]
