@@ -1343,8 +1343,8 @@ mod tests {
         assert_eq!(noise_level(&[None, None]), 0.0);
     }
 
-    #[test]
-    fn the_answer_k_chosen_would_give_replaces_a_given_k_only_with_k_far_quieter_structures() {
+    /// An answer of unit circles of 50 inliers each with the given RMS, and `outliers` −1 labels.
+    fn circles_answer(rms: &[f64], outliers: usize) -> Refined {
         let structure = |rms: f64| Structure {
             label: 0,
             model: Model::Circle {
@@ -1355,11 +1355,16 @@ mod tests {
             inliers: 50,
             rms,
         };
-        let answer = |rms: &[f64], outliers: usize| Refined {
+        Refined {
             labels: vec![-1; outliers],
             structures: rms.iter().map(|&r| structure(r)).collect(),
             sigma: 1.0,
-        };
+        }
+    }
+
+    #[test]
+    fn the_answer_k_chosen_would_give_replaces_a_given_k_only_with_k_far_quieter_structures() {
+        let answer = circles_answer;
         let given = answer(&[10.0, 12.0, 9.0], 3);
         // k structures at a tenth of the noise, a few more outliers: replaces.
         assert!(replaces_given(
@@ -1398,21 +1403,7 @@ mod tests {
 
     #[test]
     fn a_split_asks_less_quiet_than_a_replaced_k() {
-        let structure = |rms: f64| Structure {
-            label: 0,
-            model: Model::Circle {
-                cx: 0.0,
-                cy: 0.0,
-                r: 1.0,
-            },
-            inliers: 50,
-            rms,
-        };
-        let answer = |rms: &[f64]| Refined {
-            labels: vec![-1; 2],
-            structures: rms.iter().map(|&r| structure(r)).collect(),
-            sigma: 1.0,
-        };
+        let answer = |rms: &[f64]| circles_answer(rms, 2);
         let base = answer(&[9.0, 9.0]);
         // 1.8 times quieter: a split (factor 1.7), not a replacement of a given k (factor 2).
         let quieter = answer(&[5.0, 5.0]);
