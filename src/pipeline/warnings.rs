@@ -3,9 +3,9 @@
 //! from the rest), fewer structures than the k asked, and what the fit saw for the model
 //! card's validated range ([`observed`]).
 
-use super::Observed;
 use crate::data::screen;
 use crate::data::{ImageSize, Kind, PointSet};
+use crate::registry::Observed;
 
 /// The warning of an answer with fewer structures than the k the caller gave (`refined`:
 /// refinement dropped the difference; else one learned group was the outliers'); `None` when
