@@ -19,7 +19,7 @@ It does the same work as the Rust server for one point set:
    normalisation. Context Normalization (CN) standardises each channel over the points with the
    biased variance and `card.architecture.cn_epsilon`; the graph neighbourhood (graph models) is
    the point and its `graph_neighbors - 1` nearest others in the normalised coordinates;
-4. cluster the embeddings (`src/cluster.rs`) with scikit-learn: `KMeans(k-means++, n_init=4)`
+4. cluster the embeddings (`src/cluster/`) with scikit-learn: `KMeans(k-means++, n_init=4)`
    for K = 1..k_max (k_max + 1 for SOD, capped at N), the residual r(K) = inertia, and K chosen
    by the mean silhouette (`sklearn.metrics.silhouette_score`, on a seeded sample of 3000 points
    beyond 3000, like the server) or by the SOD of log r(K); K = 1 when r(1)/N < 0.01.
@@ -55,7 +55,7 @@ import numpy as np
 from sklearn.cluster import KMeans
 from sklearn.metrics import silhouette_score
 
-# Same constants as src/cluster.rs.
+# Same constants as src/cluster/.
 RESTARTS = 4
 MAX_ITER = 100
 SINGLE_SPREAD = 0.01

@@ -43,23 +43,41 @@ pub const MAX_FAR_SHARE: f64 = 0.05;
 pub struct Screened {
     /// The rows read, ascending; `None`: every row.
     pub read: Option<Vec<usize>>,
-    /// The rows set apart as far from the rest, ascending.
+    /// The rows set apart as far from the rest, ascending; the erratic tracks among them.
     pub far: Vec<usize>,
+    /// The tracks among `far` set apart for moving erratically ([`erratic_tracks`]), ascending.
+    pub erratic: Vec<usize>,
 }
 
-/// `points` `[n, d]` -> the rows to read: less the far ones ([`far_rows`]), and, for a network
-/// that reads `neighbourhoods`, the first of each group of equal rows only; every row where
-/// fewer than [`MIN_POINTS`] rows are distinct.
-pub fn screen(points: &PointSet, neighbourhoods: bool) -> Screened {
+/// `points` `[n, d]` -> the rows to read: less the far ones ([`far_rows`]) and the erratic
+/// tracks ([`erratic_tracks`] of `read`, the same rows at the frames the network reads: over a
+/// whole drive, perspective bends a near point's track far more than the median track's), and,
+/// for a network that reads `neighbourhoods`, the first of each group of equal rows only; every
+/// row where fewer than [`MIN_POINTS`] rows are distinct.
+pub fn screen(points: &PointSet, neighbourhoods: bool, read: &PointSet) -> Screened {
     let distinct = if neighbourhoods {
         distinct_rows(points)
     } else {
         (0..points.len()).collect()
     };
-    let far = far_rows(points, &distinct);
+    let mut far = far_rows(points, &distinct);
+    let erratic = if read.len() == points.len() {
+        erratic_tracks(read)
+    } else {
+        Vec::new()
+    };
+    for &i in &erratic {
+        if let Err(at) = far.binary_search(&i) {
+            far.insert(at, i);
+        }
+    }
     // Fewer distinct rows than a set needs (every row alike): read as sent, as before.
     if (far.is_empty() && distinct.len() == points.len()) || distinct.len() < MIN_POINTS {
-        return Screened { read: None, far };
+        return Screened {
+            read: None,
+            far,
+            erratic,
+        };
     }
     let read = distinct
         .into_iter()
@@ -68,6 +86,7 @@ pub fn screen(points: &PointSet, neighbourhoods: bool) -> Screened {
     Screened {
         read: Some(read),
         far,
+        erratic,
     }
 }
 
@@ -171,14 +190,146 @@ pub fn far_rows(points: &PointSet, among: &[usize]) -> Vec<usize> {
     Vec::new()
 }
 
+/// A track whose RMS acceleration is above this many times the median track's is erratic.
+pub const ERRATIC_ACCELERATIONS: f64 = 8.0;
+
+/// The tracks of `points` (trajectories of at least 3 frames) that move erratically, ascending:
+/// a tracker that lost its feature and wanders. A track's acceleration at frame t is its second
+/// difference x(t+1) − 2 x(t) + x(t−1) less the median of all tracks' at t (a camera's shake
+/// moves every track alike); a track is erratic when the RMS of it over the frames exceeds
+/// [`ERRATIC_ACCELERATIONS`] times the median track's RMS. At most [`MAX_FAR_SHARE`] of the
+/// tracks, the most erratic first; none in other kinds or where the median track does not
+/// accelerate at all (noise-free input, where any motion would count as erratic).
+pub fn erratic_tracks(points: &PointSet) -> Vec<usize> {
+    let n = points.len();
+    let frames = points.dim() / 2;
+    let most = (MAX_FAR_SHARE * n as f64).floor() as usize;
+    if points.kind() != crate::data::Kind::Trajectories || frames < 3 || most == 0 {
+        return Vec::new();
+    }
+    let median = |v: &mut Vec<f64>| {
+        let mid = (v.len() - 1) / 2;
+        *v.select_nth_unstable_by(mid, f64::total_cmp).1
+    };
+    // Second differences, [n, 2 (F − 2)].
+    let width = 2 * (frames - 2);
+    let second: Vec<f64> = (0..n)
+        .flat_map(|i| {
+            let r = points.row(i);
+            (0..width).map(move |c| r[c + 4] - 2.0 * r[c + 2] + r[c])
+        })
+        .collect();
+    let common: Vec<f64> = (0..width)
+        .map(|c| median(&mut (0..n).map(|i| second[i * width + c]).collect()))
+        .collect();
+    let rms: Vec<f64> = (0..n)
+        .map(|i| {
+            let own = &second[i * width..(i + 1) * width];
+            let ss: f64 = own.iter().zip(&common).map(|(a, m)| (a - m).powi(2)).sum();
+            (ss / width as f64).sqrt()
+        })
+        .collect();
+    let typical = median(&mut rms.clone());
+    if !(typical > 0.0) {
+        return Vec::new();
+    }
+    let mut erratic: Vec<usize> = (0..n)
+        .filter(|&i| rms[i] > ERRATIC_ACCELERATIONS * typical)
+        .collect();
+    erratic.sort_unstable_by(|&a, &b| rms[b].total_cmp(&rms[a]).then(a.cmp(&b)));
+    erratic.truncate(most);
+    erratic.sort_unstable();
+    erratic
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::data::Kind;
 
+    /// 60 tracks over 5 frames: three motions (constant velocity, steady acceleration, a slow
+    /// turn) shaken alike by a camera, with 0.1 px of seeded noise; then `wanderers` random
+    /// walks stepping about 5 px a frame.
+    fn tracks(wanderers: usize) -> PointSet {
+        let shake = [0.0, 1.5, -2.0, 0.7, 0.0];
+        let mut state = 7u64;
+        let mut noise = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 33) as f64 / (1u64 << 31) as f64 - 0.5) * 0.2
+        };
+        let mut rows: Vec<f64> = Vec::new();
+        for i in 0..60 {
+            let (x0, y0) = (10.0 * (i % 10) as f64, 12.0 * (i / 10) as f64);
+            for t in 0..5 {
+                let tf = t as f64;
+                let (x, y) = match i % 3 {
+                    0 => (x0 + 3.0 * tf, y0 + tf),
+                    1 => (x0 - 2.0 * tf - 0.5 * tf * tf, y0 + 0.3 * tf * tf),
+                    _ => {
+                        let a = 0.02 * tf;
+                        (x0 * a.cos() - y0 * a.sin(), x0 * a.sin() + y0 * a.cos())
+                    }
+                };
+                rows.extend([x + shake[t] + noise(), y - shake[t] + noise()]);
+            }
+        }
+        for w in 0..wanderers {
+            let (mut x, mut y) = (50.0 + w as f64, 30.0);
+            for t in 0..5 {
+                rows.extend([x, y]);
+                let turn = (w * 5 + t) as f64;
+                x += 5.0 * turn.cos();
+                y += 5.0 * (1.7 * turn).sin();
+            }
+        }
+        PointSet::from_flat(Kind::Trajectories, 10, rows).unwrap()
+    }
+
+    #[test]
+    fn wandering_tracks_are_erratic_and_smooth_ones_are_not() {
+        assert_eq!(erratic_tracks(&tracks(0)), Vec::<usize>::new());
+        assert_eq!(erratic_tracks(&tracks(2)), vec![60, 61]);
+        // At most 5 % of the tracks: of 10 wanderers among 70 tracks, 3.
+        assert_eq!(erratic_tracks(&tracks(10)).len(), 3);
+        // They are not read, and are named apart from the far rows.
+        let with = tracks(2);
+        let screened = screen(&with, true, &with);
+        assert_eq!(screened.erratic, vec![60, 61]);
+        assert_eq!(screened.far, vec![60, 61]);
+        assert!(!screened.read.unwrap().contains(&60));
+    }
+
+    #[test]
+    fn only_tracks_of_three_frames_or_more_can_be_erratic() {
+        // Two frames: no acceleration to measure.
+        let short = PointSet::from_flat(
+            Kind::Trajectories,
+            4,
+            (0..40).map(|v| f64::from(v * v % 17)).collect(),
+        )
+        .unwrap();
+        assert!(erratic_tracks(&short).is_empty());
+        // Points and correspondences are never tracks.
+        let curve = set(&circle());
+        assert!(erratic_tracks(&curve).is_empty());
+        // Noise-free tracks at constant velocity: the median track does not accelerate, and
+        // nothing is judged against it.
+        let still = PointSet::from_flat(
+            Kind::Trajectories,
+            6,
+            (0..40)
+                .flat_map(|i| (0..3).flat_map(move |t| [f64::from(i + t), f64::from(2 * i)]))
+                .collect(),
+        )
+        .unwrap();
+        assert!(erratic_tracks(&still).is_empty());
+    }
+
     /// [`screen`] for a network that reads neighbourhoods.
     fn screen_n(points: &PointSet) -> Screened {
-        screen(points, true)
+        screen(points, true, points)
     }
 
     fn set(rows: &[[f64; 2]]) -> PointSet {
@@ -201,7 +352,8 @@ mod tests {
             screen_n(&set(&circle())),
             Screened {
                 read: None,
-                far: Vec::new()
+                far: Vec::new(),
+                erratic: Vec::new()
             }
         );
     }
@@ -227,7 +379,8 @@ mod tests {
         let mut rows = circle();
         rows.extend(circle());
         rows.push([1e6, 1e6]);
-        let screened = screen(&set(&rows), false);
+        let points = set(&rows);
+        let screened = screen(&points, false, &points);
         assert_eq!(screened.far, [400]);
         assert_eq!(screened.read.unwrap(), (0..400).collect::<Vec<_>>());
     }

@@ -46,7 +46,7 @@ use crate::registry::{LoadedModel, Observed};
 mod seen;
 mod warnings;
 pub use seen::fit_seen;
-use warnings::{far_apart, fewer_than_asked, image_warnings, lost_marks, observed};
+use warnings::{erratic_apart, far_apart, fewer_than_asked, image_warnings, lost_marks, observed};
 
 /// Why a fit request cannot be answered by this model.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -218,8 +218,10 @@ struct ReadPlan {
     thinned: Option<(Vec<usize>, Vec<usize>)>,
     /// Whether the card's network for sparse sets reads it.
     sparse: bool,
-    /// The rows set apart as far from the rest ([`screen`]).
+    /// The rows set apart as far from the rest ([`screen`]), the erratic tracks among them.
     far: Vec<usize>,
+    /// The tracks among `far` set apart for moving erratically.
+    erratic: Vec<usize>,
 }
 
 /// Stage 1: how the model reads the set. No row far from the rest, and, for a network that
@@ -238,7 +240,11 @@ fn read_plan(
 ) -> Result<ReadPlan, FitError> {
     let card = &model.card;
     let neighbourhoods = card.architecture.neighbors > 0 || card.architecture.graph_neighbors > 0;
-    let Screened { read: kept, far } = screen(whole, neighbourhoods);
+    let Screened {
+        read: kept,
+        far,
+        erratic,
+    } = screen(whole, neighbourhoods, read);
     let Some(trained) = card.spacing else {
         return Ok(ReadPlan {
             thinned: kept
@@ -246,6 +252,7 @@ fn read_plan(
                 .transpose()?,
             sparse: false,
             far,
+            erratic,
         });
     };
     let subset = match &kept {
@@ -285,6 +292,7 @@ fn read_plan(
         thinned,
         sparse,
         far,
+        erratic,
     })
 }
 
@@ -347,8 +355,11 @@ pub struct Embedding {
     /// For each input row, its row in `values` (its own, or its nearest read point's); `None`
     /// when every row was read (m = n).
     pub owner: Option<Vec<usize>>,
-    /// The input rows not read for lying far from the rest ([`screen`]), ascending.
+    /// The input rows not read for lying far from the rest ([`screen`]), ascending; the erratic
+    /// tracks among them.
     pub far: Vec<usize>,
+    /// The tracks among `far` not read for moving erratically, ascending.
+    pub erratic: Vec<usize>,
 }
 
 impl Embedding {
@@ -389,6 +400,7 @@ pub fn embed(
         thinned,
         sparse,
         far,
+        erratic,
     } = read_plan(model, &points, &windows[0], image, seed)?;
     let (rows, owner) = thinned.unzip();
     // The windows side by side on the model's threads (each one's neighbour searches run on
@@ -409,6 +421,7 @@ pub fn embed(
         width,
         owner,
         far,
+        erratic,
     })
 }
 
@@ -885,11 +898,18 @@ fn fit_counting(
     if let Selection::Fixed(asked) = params.selection() {
         warnings.extend(fewer_than_asked(asked, k, refine_params.is_some()));
     }
-    let far: Vec<usize> = match row_of {
-        Some(row_of) => embedding.far.iter().map(|&i| row_of[i]).collect(),
-        None => embedding.far.clone(),
+    let callers = |among: &[usize]| -> Vec<usize> {
+        match row_of {
+            Some(row_of) => among.iter().map(|&i| row_of[i]).collect(),
+            None => among.to_vec(),
+        }
     };
-    warnings.extend(far_apart(&far, rows));
+    let only_far: Vec<usize> = (embedding.far.iter())
+        .filter(|i| embedding.erratic.binary_search(i).is_err())
+        .copied()
+        .collect();
+    warnings.extend(far_apart(&callers(&only_far), rows));
+    warnings.extend(erratic_apart(&callers(&embedding.erratic)));
     if let Some((from, noise, given_noise)) = replaced {
         warnings.push(format!(
             "the {k} structures answered were refined from the clustering into {from} groups \

@@ -158,6 +158,25 @@ pub(super) fn far_apart(far: &[usize], rows: &str) -> Option<String> {
     })
 }
 
+/// The warning for tracks the network did not read for moving erratically
+/// ([`screen::erratic_tracks`]), naming the first few by the caller's 0-based row numbers.
+pub(super) fn erratic_apart(erratic: &[usize]) -> Option<String> {
+    const NAMED: usize = 10;
+    let (count, named) = (erratic.len(), erratic.iter().take(NAMED));
+    (count > 0).then(|| {
+        let list = named.map(|i| i.to_string()).collect::<Vec<_>>().join(", ");
+        format!(
+            "{count} of the tracks accelerate{} more than {} times the median track (a tracker \
+             that lost its feature), so the network did not read {}: {}{list}{}",
+            if count == 1 { "s" } else { "" },
+            screen::ERRATIC_ACCELERATIONS,
+            if count == 1 { "it" } else { "them" },
+            if count == 1 { "row " } else { "rows " },
+            if count > NAMED { ", ..." } else { "" },
+        )
+    })
+}
+
 /// What a fit saw, for the card's validated range: the input's size, frames and image, and the
 /// answer's structure sizes and outlier share (only when the fit may answer outliers: a fit
 /// that cannot flag them says nothing of their share).
@@ -193,6 +212,23 @@ pub(super) fn observed(
 mod tests {
     use super::*;
     use crate::pipeline::tests::image;
+
+    #[test]
+    fn erratic_tracks_are_named_apart_from_far_rows() {
+        assert_eq!(erratic_apart(&[]), None);
+        let one = erratic_apart(&[7]).unwrap();
+        assert!(
+            one.starts_with("1 of the tracks accelerates more than 8 times the median track"),
+            "{one}"
+        );
+        assert!(one.ends_with("did not read it: row 7"), "{one}");
+        let many: Vec<usize> = (0..12).collect();
+        let text = erratic_apart(&many).unwrap();
+        assert!(
+            text.contains("rows 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, ..."),
+            "{text}"
+        );
+    }
 
     #[test]
     fn tracks_at_the_origin_are_named_as_a_trackers_lost_points() {
