@@ -219,8 +219,8 @@ pub const GIVEN_MORE_OUTLIERS: f64 = 0.2;
 
 /// Whether `chosen` (refined from the clustering K chosen would give) replaces `given` (refined
 /// from the caller's k clusters): exactly `k` structures, each measuring a noise, and
-/// [`far_quieter`] with at most [`GIVEN_MORE_OUTLIERS`] of the `n` points more as outliers.
-/// Where the k clustering mixed the structures, its groups set a wide noise level under which
+/// [`far_quieter`] by [`GIVEN_NOISE_FACTOR`] with at most [`GIVEN_MORE_OUTLIERS`] of the `n`
+/// points more as outliers. Where the k clustering mixed the structures, its groups set a wide noise level under which
 /// refinement cannot part them.
 pub fn replaces_given(given: &Refined, chosen: &Refined, k: usize, n: usize) -> bool {
     chosen.structures.len() == k
@@ -234,8 +234,9 @@ pub fn replaces_given(given: &Refined, chosen: &Refined, k: usize, n: usize) -> 
 }
 
 /// Whether `wider` (refined from one more cluster) splits a structure that `answer` pooled: it
-/// has at least as many structures that measure a noise, and is [`far_quieter`] with at most
-/// [`SPLIT_MORE_OUTLIERS`] of the `n` points more as outliers. Two planes (or curves) held by
+/// has at least as many structures that measure a noise, and is [`far_quieter`] by
+/// [`SPLIT_NOISE_FACTOR`] with at most [`SPLIT_MORE_OUTLIERS`] of the `n` points more as
+/// outliers. Two planes (or curves) held by
 /// one structure give it a noise level near their separation; apart, each has the sensor's. As
 /// many structures count too: two structures that each held parts of two crossing curves,
 /// against the two curves apart (the extra group taken by a third structure the rounds then

@@ -230,7 +230,8 @@ pub fn erratic_tracks(points: &PointSet) -> Vec<usize> {
         })
         .collect();
     let typical = median(&mut rms.clone());
-    if !(typical > 0.0) {
+    // Not above zero: nothing to judge against.
+    if typical.partial_cmp(&0.0) != Some(Ordering::Greater) {
         return Vec::new();
     }
     let mut erratic: Vec<usize> = (0..n)
@@ -262,7 +263,7 @@ mod tests {
         let mut rows: Vec<f64> = Vec::new();
         for i in 0..60 {
             let (x0, y0) = (10.0 * (i % 10) as f64, 12.0 * (i / 10) as f64);
-            for t in 0..5 {
+            for (t, jolt) in shake.iter().enumerate() {
                 let tf = t as f64;
                 let (x, y) = match i % 3 {
                     0 => (x0 + 3.0 * tf, y0 + tf),
@@ -272,7 +273,7 @@ mod tests {
                         (x0 * a.cos() - y0 * a.sin(), x0 * a.sin() + y0 * a.cos())
                     }
                 };
-                rows.extend([x + shake[t] + noise(), y - shake[t] + noise()]);
+                rows.extend([x + jolt + noise(), y - jolt + noise()]);
             }
         }
         for w in 0..wanderers {

@@ -28,7 +28,7 @@
 //!    timings.
 //!
 //! Tracks seen in some frames only run these stages on the tracks seen throughout, and the
-//! others are placed on the motions found ([`seen`]).
+//! others are placed on the motions found ([`fit_seen`]).
 
 use std::borrow::Cow;
 use std::time::Instant;
