@@ -142,18 +142,12 @@ pub(super) fn lost_marks(points: &PointSet) -> Option<String> {
 /// The warning for rows the network did not read for lying far from the rest
 /// ([`crate::data::screen`]), naming the first few by the caller's 0-based row numbers.
 pub(super) fn far_apart(far: &[usize], rows: &str) -> Option<String> {
-    const NAMED: usize = 10;
-    let (count, named) = (far.len(), far.iter().take(NAMED));
-    (count > 0).then(|| {
-        let list = named.map(|i| i.to_string()).collect::<Vec<_>>().join(", ");
+    not_read(far, |count| {
         format!(
             "{count} of the {rows} lie{} far from the rest (more than {} times the spread of \
-             the {rows} nearer the centre), so the network did not read {}: {}{list}{}",
+             the {rows} nearer the centre)",
             if count == 1 { "s" } else { "" },
             screen::FAR_SPREADS,
-            if count == 1 { "it" } else { "them" },
-            if count == 1 { "row " } else { "rows " },
-            if count > NAMED { ", ..." } else { "" },
         )
     })
 }
@@ -161,17 +155,29 @@ pub(super) fn far_apart(far: &[usize], rows: &str) -> Option<String> {
 /// The warning for tracks the network did not read for moving erratically
 /// ([`screen::erratic_tracks`]), naming the first few by the caller's 0-based row numbers.
 pub(super) fn erratic_apart(erratic: &[usize]) -> Option<String> {
-    const NAMED: usize = 10;
-    let (count, named) = (erratic.len(), erratic.iter().take(NAMED));
-    (count > 0).then(|| {
-        let list = named.map(|i| i.to_string()).collect::<Vec<_>>().join(", ");
+    not_read(erratic, |count| {
         format!(
             "{count} of the tracks accelerate{} more than {} times the median track (a tracker \
-             that lost its feature), so the network did not read {}: {}{list}{}",
+             that lost its feature)",
             if count == 1 { "s" } else { "" },
             screen::ERRATIC_ACCELERATIONS,
+        )
+    })
+}
+
+/// `why(count)`, then that the network did not read them and the first few of `rows`; `None`
+/// when `rows` is empty.
+fn not_read(rows: &[usize], why: impl FnOnce(usize) -> String) -> Option<String> {
+    const NAMED: usize = 10;
+    let count = rows.len();
+    (count > 0).then(|| {
+        let list: Vec<String> = rows.iter().take(NAMED).map(|i| i.to_string()).collect();
+        format!(
+            "{}, so the network did not read {}: {}{}{}",
+            why(count),
             if count == 1 { "it" } else { "them" },
             if count == 1 { "row " } else { "rows " },
+            list.join(", "),
             if count > NAMED { ", ..." } else { "" },
         )
     })
