@@ -190,14 +190,22 @@ pub fn far_rows(points: &PointSet, among: &[usize]) -> Vec<usize> {
     Vec::new()
 }
 
-/// A track whose RMS acceleration is above this many times the median track's is erratic.
+/// A track whose RMS acceleration is above this many times the median track's is erratic
+/// (when it also accelerates faster than tracks move, [`ERRATIC_SPEEDS`]).
 pub const ERRATIC_ACCELERATIONS: f64 = 8.0;
+/// An erratic track's RMS acceleration per frame is also above this many times the typical
+/// track's speed per frame: real motion is smooth at video rates, its acceleration well below
+/// its speed, while a wandering track turns within a frame.
+pub const ERRATIC_SPEEDS: f64 = 2.0;
 
 /// The tracks of `points` (trajectories of at least 3 frames) that move erratically, ascending:
 /// a tracker that lost its feature and wanders. A track's acceleration at frame t is its second
 /// difference x(t+1) − 2 x(t) + x(t−1) less the median of all tracks' at t (a camera's shake
-/// moves every track alike); a track is erratic when the RMS of it over the frames exceeds
-/// [`ERRATIC_ACCELERATIONS`] times the median track's RMS. At most [`MAX_FAR_SHARE`] of the
+/// moves every track alike), and its velocity x(t+1) − x(t) less the median track's. A track is
+/// erratic when the RMS of its acceleration (pixels per frame², over the frames) exceeds both
+/// [`ERRATIC_ACCELERATIONS`] times the median track's and [`ERRATIC_SPEEDS`] times the typical
+/// speed (the median over tracks of each one's mean speed): a moving object's tracks accelerate
+/// more than the background's, but far less than they move. At most [`MAX_FAR_SHARE`] of the
 /// tracks, the most erratic first; none in other kinds or where the median track does not
 /// accelerate at all (noise-free input, where any motion would count as erratic).
 pub fn erratic_tracks(points: &PointSet) -> Vec<usize> {
@@ -211,32 +219,44 @@ pub fn erratic_tracks(points: &PointSet) -> Vec<usize> {
         let mid = (v.len() - 1) / 2;
         *v.select_nth_unstable_by(mid, f64::total_cmp).1
     };
-    // Second differences, [n, 2 (F − 2)].
-    let width = 2 * (frames - 2);
-    let second: Vec<f64> = (0..n)
-        .flat_map(|i| {
-            let r = points.row(i);
-            (0..width).map(move |c| r[c + 4] - 2.0 * r[c + 2] + r[c])
-        })
+    // Each track's differences of order 1 (velocity) or 2 (acceleration) less the median
+    // track's, frame by frame: [n, 2 (F − order)].
+    let relative = |order: usize| -> (Vec<f64>, usize) {
+        let width = 2 * (frames - order);
+        let diff: Vec<f64> = (0..n)
+            .flat_map(|i| {
+                let r = points.row(i);
+                (0..width).map(move |c| match order {
+                    1 => r[c + 2] - r[c],
+                    _ => r[c + 4] - 2.0 * r[c + 2] + r[c],
+                })
+            })
+            .collect();
+        let common: Vec<f64> = (0..width)
+            .map(|c| median(&mut (0..n).map(|i| diff[i * width + c]).collect()))
+            .collect();
+        let less: Vec<f64> = (0..n * width)
+            .map(|j| diff[j] - common[j % width])
+            .collect();
+        (less, width)
+    };
+    let (acceleration, width) = relative(2);
+    let rms: Vec<f64> = acceleration
+        .chunks_exact(width)
+        .map(|a| (a.iter().map(|v| v * v).sum::<f64>() / (frames - 2) as f64).sqrt())
         .collect();
-    let common: Vec<f64> = (0..width)
-        .map(|c| median(&mut (0..n).map(|i| second[i * width + c]).collect()))
+    let (velocity, step) = relative(1);
+    let mut speeds: Vec<f64> = velocity
+        .chunks_exact(step)
+        .map(|v| v.chunks_exact(2).map(|p| p[0].hypot(p[1])).sum::<f64>() / (frames - 1) as f64)
         .collect();
-    let rms: Vec<f64> = (0..n)
-        .map(|i| {
-            let own = &second[i * width..(i + 1) * width];
-            let ss: f64 = own.iter().zip(&common).map(|(a, m)| (a - m).powi(2)).sum();
-            (ss / width as f64).sqrt()
-        })
-        .collect();
-    let typical = median(&mut rms.clone());
+    let (typical, speed) = (median(&mut rms.clone()), median(&mut speeds));
     // Not above zero: nothing to judge against.
     if typical.partial_cmp(&0.0) != Some(Ordering::Greater) {
         return Vec::new();
     }
-    let mut erratic: Vec<usize> = (0..n)
-        .filter(|&i| rms[i] > ERRATIC_ACCELERATIONS * typical)
-        .collect();
+    let bar = (ERRATIC_ACCELERATIONS * typical).max(ERRATIC_SPEEDS * speed);
+    let mut erratic: Vec<usize> = (0..n).filter(|&i| rms[i] > bar).collect();
     erratic.sort_unstable_by(|&a, &b| rms[b].total_cmp(&rms[a]).then(a.cmp(&b)));
     erratic.truncate(most);
     erratic.sort_unstable();
@@ -300,6 +320,31 @@ mod tests {
         assert_eq!(screened.erratic, vec![60, 61]);
         assert_eq!(screened.far, vec![60, 61]);
         assert!(!screened.read.unwrap().contains(&60));
+    }
+
+    #[test]
+    fn smooth_tracks_that_accelerate_more_than_most_are_not_erratic() {
+        // A drive's view: 80 background tracks flowing out at 1 to 9 px a frame with 0.05 px
+        // of acceleration, and 8 near points that accelerate 20 times as much (1 px a frame²)
+        // while moving 12 px a frame: smooth motion, far below its speed.
+        let rows: Vec<f64> = (0..88)
+            .flat_map(|i| {
+                let near = i >= 80;
+                let speed = if near { 12.0 } else { 1.0 + (i % 9) as f64 };
+                let accel = if near {
+                    1.0
+                } else {
+                    0.05 * ((i % 3) as f64 - 1.0)
+                };
+                let (x0, y0) = (7.0 * (i % 11) as f64, 5.0 * (i / 11) as f64);
+                (0..5).flat_map(move |t| {
+                    let t = t as f64;
+                    [x0 + speed * t + 0.5 * accel * t * t, y0 + 0.3 * speed * t]
+                })
+            })
+            .collect();
+        let drive = PointSet::from_flat(Kind::Trajectories, 10, rows).unwrap();
+        assert!(erratic_tracks(&drive).is_empty());
     }
 
     #[test]

@@ -157,10 +157,11 @@ pub(super) fn far_apart(far: &[usize], rows: &str) -> Option<String> {
 pub(super) fn erratic_apart(erratic: &[usize]) -> Option<String> {
     not_read(erratic, |count| {
         format!(
-            "{count} of the tracks accelerate{} more than {} times the median track (a tracker \
-             that lost its feature)",
+            "{count} of the tracks accelerate{} more than {} times the median track and {} times \
+             as fast as tracks move (a tracker that lost its feature)",
             if count == 1 { "s" } else { "" },
             screen::ERRATIC_ACCELERATIONS,
+            screen::ERRATIC_SPEEDS,
         )
     })
 }
@@ -224,7 +225,9 @@ mod tests {
         assert_eq!(erratic_apart(&[]), None);
         let one = erratic_apart(&[7]).unwrap();
         assert!(
-            one.starts_with("1 of the tracks accelerates more than 8 times the median track"),
+            one.starts_with(
+                "1 of the tracks accelerates more than 8 times the median track and 2 times"
+            ),
             "{one}"
         );
         assert!(one.ends_with("did not read it: row 7"), "{one}");
