@@ -2,14 +2,16 @@
 the image and step by about twice a real track's median frame-to-frame motion (a tracker that
 lost its feature and wanders). Each sequence is fitted by its fold model with k = its number of
 motions, and scored twice under the best matching of groups: over every track (a garbage track is
-right only when answered -1), and over the real tracks alone (how much the garbage moves them).
+right only when answered -1), and over the real tracks alone (how much the garbage moves them);
+and, without garbage, how many real tracks the fits' warnings count as erratic (not read by
+the network).
 
     python3 research/garbage-tracks.py PORT SHARE [DATA]
 
 PORT: a server on the fold models (`multifit-server --models runs/cv/kt-pretrained/models`,
 which names each `fold-<sequence>`); SHARE: garbage tracks as a share of the real ones (0 for
 none); DATA: default ../shared/datasets/kt3dmoseg_first5. Standard library only."""
-import glob, json, random, statistics, sys
+import glob, json, random, re, statistics, sys
 
 from fitting import error, error_minus_one, post
 
@@ -32,7 +34,7 @@ def garbage(rows, share, width, height, rng):
 def main():
     port, share = sys.argv[1], float(sys.argv[2])
     data = sys.argv[3] if len(sys.argv) > 3 else "../shared/datasets/kt3dmoseg_first5"
-    every, real = [], []
+    every, real, flagged, total = [], [], 0, 0
     for path in sorted(glob.glob(f"{data}/*.json")):
         seq = json.load(open(path))
         rows, truth = seq["points"], seq["labels"]
@@ -42,10 +44,15 @@ def main():
                              "points": rows + walks, "image_size": [width, height],
                              "k": len(set(truth))})
         labels = answer["labels"]
+        for warning in answer["warnings"]:
+            count = re.match(r"(\d+) of the tracks accelerate", warning)
+            flagged += int(count.group(1)) if count else 0
+        total += len(rows)
         every.append(error_minus_one(truth + [0] * len(walks), labels))
         real.append(error(truth, labels[:len(rows)]))
     print(f"garbage {100 * share:g} %: every track {100 * statistics.mean(every):.2f} %, "
-          f"the real tracks {100 * statistics.mean(real):.2f} % ({len(every)} sequences)")
+          f"the real tracks {100 * statistics.mean(real):.2f} % ({len(every)} sequences)"
+          + (f"; real tracks set apart as erratic: {flagged} of {total}" if share == 0 else ""))
 
 
 if __name__ == "__main__":
