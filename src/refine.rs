@@ -54,9 +54,9 @@
 //! rounds nor the hypotheses part them. With K chosen the fit also refines the k + 1
 //! clustering ([`crate::pipeline::refine_chosen`]) and keeps that answer when it has at least as
 //! many structures, a noise level ([`Refined::noise`]) at most 1 / 1.7 of the k answer's
-//! ([`SPLIT_NOISE_FACTOR`]), and at most
-//! 5 % of the points more as outliers; from an answer so kept it goes on to the k + 2
-//! clustering under the same test, and so on ([`split_while_pooled`]). On the AdelaideRMF
+//! ([`SPLIT_NOISE_FACTOR`]), and at most 5 % of the points more as outliers; from an answer so
+//! kept it goes on to the k + 2 clustering under the same test, and so on
+//! ([`split_while_pooled`]). On the AdelaideRMF
 //! homography folds SOD's K was right on 52.9 % of the pairs without it, 82.4 % with it, and
 //! 88.2 % once merging asked one of the two structures' models instead of both.
 //!
@@ -220,8 +220,8 @@ pub const GIVEN_MORE_OUTLIERS: f64 = 0.2;
 /// Whether `chosen` (refined from the clustering K chosen would give) replaces `given` (refined
 /// from the caller's k clusters): exactly `k` structures, each measuring a noise, and
 /// [`far_quieter`] by [`GIVEN_NOISE_FACTOR`] with at most [`GIVEN_MORE_OUTLIERS`] of the `n`
-/// points more as outliers. Where the k clustering mixed the structures, its groups set a wide noise level under which
-/// refinement cannot part them.
+/// points more as outliers. Where the k clustering mixed the structures, its groups set a wide
+/// noise level under which refinement cannot part them.
 pub fn replaces_given(given: &Refined, chosen: &Refined, k: usize, n: usize) -> bool {
     chosen.structures.len() == k
         && chosen.measured().count() == k
@@ -236,11 +236,10 @@ pub fn replaces_given(given: &Refined, chosen: &Refined, k: usize, n: usize) -> 
 /// Whether `wider` (refined from one more cluster) splits a structure that `answer` pooled: it
 /// has at least as many structures that measure a noise, and is [`far_quieter`] by
 /// [`SPLIT_NOISE_FACTOR`] with at most [`SPLIT_MORE_OUTLIERS`] of the `n` points more as
-/// outliers. Two planes (or curves) held by
-/// one structure give it a noise level near their separation; apart, each has the sensor's. As
-/// many structures count too: two structures that each held parts of two crossing curves,
-/// against the two curves apart (the extra group taken by a third structure the rounds then
-/// dropped or merged). A structure split in two halves keeps its noise, and an outlier group
+/// outliers. Two planes (or curves) held by one structure give it a noise level near their
+/// separation; apart, each has the sensor's. As many structures count too: two structures that
+/// each held parts of two crossing curves, against the two curves apart (the extra group taken
+/// by a third structure the rounds then dropped or merged). A structure split in two halves keeps its noise, and an outlier group
 /// split in two is dissolved again, so neither passes.
 pub fn splits_pooled(answer: &Refined, wider: &Refined, n: usize) -> bool {
     wider.measured().count() >= answer.measured().count()

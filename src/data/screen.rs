@@ -28,6 +28,7 @@
 use std::cmp::Ordering;
 
 use super::{MIN_POINTS, PointSet};
+use crate::geometry::linalg::median;
 
 /// A row farther than this many RMS spreads of the other rows from their centroid is far.
 pub const FAR_SPREADS: f64 = 10.0;
@@ -215,10 +216,6 @@ pub fn erratic_tracks(points: &PointSet) -> Vec<usize> {
     if points.kind() != crate::data::Kind::Trajectories || frames < 3 || most == 0 {
         return Vec::new();
     }
-    let median = |v: &mut Vec<f64>| {
-        let mid = (v.len() - 1) / 2;
-        *v.select_nth_unstable_by(mid, f64::total_cmp).1
-    };
     // Each track's differences of order 1 (velocity) or 2 (acceleration) less the median
     // track's, frame by frame: [n, 2 (F − order)].
     let relative = |order: usize| -> (Vec<f64>, usize) {
@@ -233,7 +230,7 @@ pub fn erratic_tracks(points: &PointSet) -> Vec<usize> {
             })
             .collect();
         let common: Vec<f64> = (0..width)
-            .map(|c| median(&mut (0..n).map(|i| diff[i * width + c]).collect()))
+            .map(|c| median(&mut (0..n).map(|i| diff[i * width + c]).collect::<Vec<_>>()))
             .collect();
         let less: Vec<f64> = (0..n * width)
             .map(|j| diff[j] - common[j % width])

@@ -714,50 +714,43 @@ impl ViewChange {
     /// `seq` as presented; labels and row order unchanged. Without an image size the bounding
     /// box of each view's points stands for its image.
     fn apply(self, seq: &Sequence) -> Sequence {
-        let dim = seq.points.dim();
-        let views = dim / 2;
-        let height = |v: usize| match seq.image_size {
-            Some(size) => size.view(v)[1],
-            None => (0..seq.points.len())
-                .map(|i| seq.points.row(i)[2 * v + 1])
-                .fold(0.0, f64::max),
-        };
-        let heights: Vec<f64> = (0..views).map(height).collect();
-        let values: Vec<f64> = match self {
+        let (points, image_size) = match self {
             ViewChange::AsSent => return seq.clone(),
-            ViewChange::Swapped => {
-                let swapped = crate::data::Symmetry::Reverse.apply_points(&seq.points, None);
-                return Sequence {
-                    points: swapped.expect("correspondences have two views"),
-                    image_size: seq
-                        .image_size
-                        .map(|s| ImageSize::per_view(s.view(1), s.view(0)).expect("valid sizes")),
-                    ..seq.clone()
-                };
+            ViewChange::Swapped => (
+                (crate::data::Symmetry::Reverse.apply_points(&seq.points, None))
+                    .expect("correspondences have two views"),
+                (seq.image_size)
+                    .map(|s| ImageSize::per_view(s.view(1), s.view(0)).expect("valid sizes")),
+            ),
+            ViewChange::YFlipped | ViewChange::QuarterTurn => {
+                let turn = self == ViewChange::QuarterTurn;
+                let (dim, rows) = (seq.points.dim(), seq.points.len());
+                let views = dim / 2;
+                let heights: Vec<f64> = (0..views)
+                    .map(|v| match seq.image_size {
+                        Some(size) => size.view(v)[1],
+                        None => (0..rows)
+                            .map(|i| seq.points.row(i)[2 * v + 1])
+                            .fold(0.0, f64::max),
+                    })
+                    .collect();
+                let values: Vec<f64> = (seq.points.values().chunks_exact(2).enumerate())
+                    .flat_map(|(j, p)| {
+                        let up = heights[j % views] - p[1];
+                        if turn { [up, p[0]] } else { [p[0], up] }
+                    })
+                    .collect();
+                let size = seq.image_size.map(|s| match turn {
+                    true => {
+                        let ([w1, h1], [w2, h2]) = (s.view(0), s.view(1));
+                        ImageSize::per_view([h1, w1], [h2, w2]).expect("valid sizes")
+                    }
+                    false => s,
+                });
+                let kind = seq.points.kind();
+                let points = PointSet::from_flat(kind, dim, values).expect("finite values");
+                (points, size)
             }
-            ViewChange::YFlipped => seq
-                .points
-                .values()
-                .chunks_exact(2)
-                .enumerate()
-                .flat_map(|(j, p)| [p[0], heights[j % views] - p[1]])
-                .collect(),
-            ViewChange::QuarterTurn => seq
-                .points
-                .values()
-                .chunks_exact(2)
-                .enumerate()
-                .flat_map(|(j, p)| [heights[j % views] - p[1], p[0]])
-                .collect(),
-        };
-        let points = PointSet::from_flat(seq.points.kind(), dim, values).expect("finite values");
-        let image_size = match (self, seq.image_size) {
-            (ViewChange::QuarterTurn, Some(s)) => {
-                let [w1, h1] = s.view(0);
-                let [w2, h2] = s.view(1);
-                Some(ImageSize::per_view([h1, w1], [h2, w2]).expect("valid sizes"))
-            }
-            (_, size) => size,
         };
         Sequence {
             points,
