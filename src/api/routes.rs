@@ -294,6 +294,7 @@ async fn run_fit(state: &AppState, job: FitJob) -> Result<FitResponse, ApiError>
                 symmetries,
                 refine: job.refine,
                 outlier_group: job.outlier_group,
+                erratic_outliers: job.erratic_outliers,
             };
             let outcome = match &job.visibility {
                 Some(seen) => {

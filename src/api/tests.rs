@@ -375,11 +375,6 @@ async fn every_error_code_answers_its_status_and_the_json_shape() {
             E::InvalidRequest,
         ),
         (
-            "outliers without refine for tracks",
-            json!({"kind": "trajectories", "points": tracks(), "refine": false, "outliers": true}),
-            E::InvalidRequest,
-        ),
-        (
             "points and matrix",
             json!({"kind": "trajectories", "points": tracks(), "trajectory_matrix": [[0, 1], [0, 1], [0, 1], [0, 1]]}),
             E::InvalidRequest,

@@ -294,6 +294,9 @@ pub struct FitJob {
     /// Without refinement, whether the network's outlier group may be answered -1 (with k
     /// given or chosen; see [`crate::pipeline::FitOptions::outlier_group`]).
     pub outlier_group: bool,
+    /// Whether tracks set apart as erratic are answered -1 (unless the request says
+    /// `outliers: false`; see [`crate::pipeline::FitOptions::erratic_outliers`]).
+    pub erratic_outliers: bool,
     /// Which frames each track was seen in, when the request said (trajectories).
     pub visibility: Option<Visibility>,
 }
@@ -498,16 +501,8 @@ impl FitRequest {
                 ));
             }
             // Unrefined, curve and correspondence fits answer the outlier group their network
-            // learned -1 (`outlier_group` below); motion networks learned none.
-            (false, Some(true), None)
-                if model.card.family() == crate::geometry::Family::Subspace =>
-            {
-                return Err(ApiError::new(
-                    ErrorCode::InvalidRequest,
-                    "outliers: true needs refine: true for trajectories (their networks learned no \
-                     outlier group)",
-                ));
-            }
+            // learned -1 (`outlier_group` below); motion networks learned none, and answer -1
+            // only the tracks set apart as erratic (`erratic_outliers` below).
             (false, _, None) => None,
             (true, outliers, threshold) => {
                 if let Some(t) = threshold
@@ -581,6 +576,7 @@ impl FitRequest {
             return_embeddings,
             test_symmetries: self.test_symmetries.unwrap_or(true),
             outlier_group: self.outliers.unwrap_or(model.card.outliers),
+            erratic_outliers: self.outliers != Some(false),
             refine,
             visibility,
         })

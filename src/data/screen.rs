@@ -198,15 +198,22 @@ pub const ERRATIC_ACCELERATIONS: f64 = 8.0;
 /// track's speed per frame: real motion is smooth at video rates, its acceleration well below
 /// its speed, while a wandering track turns within a frame.
 pub const ERRATIC_SPEEDS: f64 = 2.0;
+/// An erratic track's RMS acceleration is also above this share of its own mean speed: a
+/// random walk's is about 1.6 times it (steps of σ per axis: acceleration 2σ RMS, speed 1.25σ
+/// on average) and a jump's more, while a smooth track accelerates far less than it moves, the
+/// fast tracks of points near a moving camera too (a third of their speed where perspective
+/// bends them most).
+pub const ERRATIC_OWN_SPEED: f64 = 0.7;
 
 /// The tracks of `points` (trajectories of at least 3 frames) that move erratically, ascending:
 /// a tracker that lost its feature and wanders. A track's acceleration at frame t is its second
 /// difference x(t+1) − 2 x(t) + x(t−1) less the median of all tracks' at t (a camera's shake
 /// moves every track alike), and its velocity x(t+1) − x(t) less the median track's. A track is
-/// erratic when the RMS of its acceleration (pixels per frame², over the frames) exceeds both
-/// [`ERRATIC_ACCELERATIONS`] times the median track's and [`ERRATIC_SPEEDS`] times the typical
-/// speed (the median over tracks of each one's mean speed): a moving object's tracks accelerate
-/// more than the background's, but far less than they move. At most [`MAX_FAR_SHARE`] of the
+/// erratic when the RMS of its acceleration (pixels per frame², over the frames) exceeds
+/// [`ERRATIC_ACCELERATIONS`] times the median track's, [`ERRATIC_SPEEDS`] times the typical
+/// speed (the median over tracks of each one's mean speed) and [`ERRATIC_OWN_SPEED`] times its
+/// own mean speed: a moving object's tracks accelerate more than the background's, but far less
+/// than they move. At most [`MAX_FAR_SHARE`] of the
 /// tracks, the most erratic first; none in other kinds or where the median track does not
 /// accelerate at all (noise-free input, where any motion would count as erratic).
 pub fn erratic_tracks(points: &PointSet) -> Vec<usize> {
@@ -243,17 +250,19 @@ pub fn erratic_tracks(points: &PointSet) -> Vec<usize> {
         .map(|a| (a.iter().map(|v| v * v).sum::<f64>() / (frames - 2) as f64).sqrt())
         .collect();
     let (velocity, step) = relative(1);
-    let mut speeds: Vec<f64> = velocity
+    let speeds: Vec<f64> = velocity
         .chunks_exact(step)
         .map(|v| v.chunks_exact(2).map(|p| p[0].hypot(p[1])).sum::<f64>() / (frames - 1) as f64)
         .collect();
-    let (typical, speed) = (median(&mut rms.clone()), median(&mut speeds));
+    let (typical, speed) = (median(&mut rms.clone()), median(&mut speeds.clone()));
     // Not above zero: nothing to judge against.
     if typical.partial_cmp(&0.0) != Some(Ordering::Greater) {
         return Vec::new();
     }
     let bar = (ERRATIC_ACCELERATIONS * typical).max(ERRATIC_SPEEDS * speed);
-    let mut erratic: Vec<usize> = (0..n).filter(|&i| rms[i] > bar).collect();
+    let mut erratic: Vec<usize> = (0..n)
+        .filter(|&i| rms[i] > bar && rms[i] > ERRATIC_OWN_SPEED * speeds[i])
+        .collect();
     erratic.sort_unstable_by(|&a, &b| rms[b].total_cmp(&rms[a]).then(a.cmp(&b)));
     erratic.truncate(most);
     erratic.sort_unstable();
@@ -261,14 +270,14 @@ pub fn erratic_tracks(points: &PointSet) -> Vec<usize> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::data::Kind;
 
     /// 60 tracks over 5 frames: three motions (constant velocity, steady acceleration, a slow
     /// turn) shaken alike by a camera, with 0.1 px of seeded noise; then `wanderers` random
     /// walks stepping about 5 px a frame.
-    fn tracks(wanderers: usize) -> PointSet {
+    pub(crate) fn tracks(wanderers: usize) -> PointSet {
         let shake = [0.0, 1.5, -2.0, 0.7, 0.0];
         let mut state = 7u64;
         let mut noise = move || {
@@ -330,6 +339,31 @@ mod tests {
                 let speed = if near { 12.0 } else { 1.0 + (i % 9) as f64 };
                 let accel = if near {
                     1.0
+                } else {
+                    0.05 * ((i % 3) as f64 - 1.0)
+                };
+                let (x0, y0) = (7.0 * (i % 11) as f64, 5.0 * (i / 11) as f64);
+                (0..5).flat_map(move |t| {
+                    let t = t as f64;
+                    [x0 + speed * t + 0.5 * accel * t * t, y0 + 0.3 * speed * t]
+                })
+            })
+            .collect();
+        let drive = PointSet::from_flat(Kind::Trajectories, 10, rows).unwrap();
+        assert!(erratic_tracks(&drive).is_empty());
+    }
+
+    #[test]
+    fn fast_smooth_tracks_near_a_moving_camera_are_not_erratic() {
+        // 80 background tracks at 1 to 9 px a frame, and 6 near points moving 80 px a frame
+        // and accelerating 25 px a frame²: ten times the typical speed, but a third of their
+        // own (perspective bending a near point's track as the camera drives past).
+        let rows: Vec<f64> = (0..86)
+            .flat_map(|i| {
+                let near = i >= 80;
+                let speed = if near { 80.0 } else { 1.0 + (i % 9) as f64 };
+                let accel = if near {
+                    25.0
                 } else {
                     0.05 * ((i % 3) as f64 - 1.0)
                 };

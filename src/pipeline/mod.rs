@@ -93,6 +93,10 @@ pub struct FitOptions<'a> {
     /// K that holds the outliers ([`refine::outlier_group`]), or the one group of the k + 1
     /// clustering for a k given that follows no model.
     pub outlier_group: bool,
+    /// Whether tracks set apart as erratic ([`Embedding::erratic`]) are answered −1, refined or
+    /// not: they follow no motion (the request's `outliers` unless it is false). Otherwise each
+    /// takes the label of the structure, or of the read track, nearest it.
+    pub erratic_outliers: bool,
 }
 
 /// The answer to one fit.
@@ -575,6 +579,9 @@ pub fn refine(
                 .map(|s| (s.model.residual(rows.points.row(i)), s.label as i64))
                 .min_by(|a, b| a.0.total_cmp(&b.0));
             all[i] = nearest.map_or(-1, |(_, l)| l);
+            if let Some((_, l)) = nearest {
+                refined.structures[l as usize].inliers += 1;
+            }
         }
     }
     refined.labels = all;
@@ -774,6 +781,7 @@ fn fit_counting(
         symmetries,
         refine: refine_params,
         outlier_group,
+        erratic_outliers,
     } = *options;
     if let Selection::Fixed(k) = params.selection()
         && k > points.len()
@@ -883,13 +891,17 @@ fn fit_counting(
         }
         None => unchanged(&clustering),
     };
+    let (mut labels, mut structures) = (labels, structures);
+    if erratic_outliers {
+        erratic_as_outliers(&mut labels, &mut structures, &embedding.erratic);
+    }
     let t3 = Instant::now();
-    // Whether this fit may answer -1: refinement with outliers, or a model whose outlier group
-    // is answered apart.
+    // Whether this fit may answer -1: refinement with outliers, a model whose outlier group is
+    // answered apart, or erratic tracks answered -1.
     let flags_outliers = match refine_params {
         Some(r) => r.outliers,
         None => outlier_group && model.card.family() != geometry::Family::Subspace,
-    };
+    } || (erratic_outliers && !embedding.erratic.is_empty());
     let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
     let mut warnings = model.card.warnings(&Observed {
         rows,
@@ -909,7 +921,10 @@ fn fit_counting(
         .copied()
         .collect();
     warnings.extend(far_apart(&callers(&only_far), rows));
-    warnings.extend(erratic_apart(&callers(&embedding.erratic)));
+    warnings.extend(erratic_apart(
+        &callers(&embedding.erratic),
+        erratic_outliers,
+    ));
     if let Some((from, noise, given_noise)) = replaced {
         warnings.push(format!(
             "the {k} structures answered were refined from the clustering into {from} groups \
@@ -972,6 +987,20 @@ fn the_outlier_group(
         family,
         model.pool(),
     )
+}
+
+/// The tracks set apart as erratic (`erratic`, ascending rows) answered −1, each taken off the
+/// structure it was joined to (with refinement; none without). A far row joins a structure, or
+/// takes a read row's label, only after the groups are made, so no group loses its last point.
+pub fn erratic_as_outliers(labels: &mut [i64], structures: &mut [Structure], erratic: &[usize]) {
+    for &i in erratic {
+        if let Ok(l) = usize::try_from(labels[i]) {
+            if let Some(s) = structures.get_mut(l) {
+                s.inliers = s.inliers.saturating_sub(1);
+            }
+            labels[i] = -1;
+        }
+    }
 }
 
 /// The clustering's labels and K as the answer, with no structures (an unrefined fit), its group
@@ -1050,6 +1079,7 @@ impl LoadedModel {
             symmetries,
             refine: None,
             outlier_group: false,
+            erratic_outliers: false,
         };
         fit(self, points, image, &options)
     }
@@ -1176,6 +1206,7 @@ pub(crate) mod tests {
             symmetries: &[],
             refine: None,
             outlier_group: false,
+            erratic_outliers: false,
         }
     }
 
@@ -1357,6 +1388,50 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn erratic_tracks_are_answered_minus_one_unless_outliers_are_off() {
+        use crate::registry::tests::tiny_model;
+        let model = tiny_model("tracks", Kind::Trajectories, 10, 3);
+        // 60 tracks of three motions, then two wanderers (rows 60 and 61).
+        let points = crate::data::screen::tests::tracks(2);
+        let params = fixed(3);
+        let kept = RefineParams {
+            outliers: false,
+            ..RefineParams::default()
+        };
+        for refine in [None, Some(kept)] {
+            for erratic_outliers in [true, false] {
+                let options = FitOptions {
+                    params: &params,
+                    symmetries: &[],
+                    refine,
+                    outlier_group: false,
+                    erratic_outliers,
+                };
+                let fit = fit(&model, &points, None, &options).unwrap();
+                let case = format!("refine {}, apart {erratic_outliers}", refine.is_some());
+                assert!(fit.labels[..60].iter().all(|&l| l >= 0), "{case}");
+                let wanderers = &fit.labels[60..];
+                match erratic_outliers {
+                    true => assert_eq!(wanderers, &[-1, -1], "{case}"),
+                    false => assert!(wanderers.iter().all(|&l| l >= 0), "{case}"),
+                }
+                assert!(
+                    fit.warnings
+                        .iter()
+                        .any(|w| w.contains("a tracker that lost its feature")),
+                    "{case}"
+                );
+                // A structure's inliers are the points it labels, the far rows it took too.
+                for s in &fit.structures {
+                    let carried = fit.labels.iter().filter(|&&l| l == s.label as i64);
+                    assert_eq!(s.inliers, carried.count(), "{case}");
+                }
+                assert_eq!(fit.structures.is_empty(), refine.is_none(), "{case}");
+            }
+        }
+    }
+
+    #[test]
     fn refinement_answers_structures_and_counts_them_as_k() {
         let model = tiny(vec![]);
         let (points, image, params) = ten_tracks(7, 13);
@@ -1365,6 +1440,7 @@ pub(crate) mod tests {
             symmetries: &[],
             refine: Some(RefineParams::default()),
             outlier_group: false,
+            erratic_outliers: false,
         };
         let fit = fit(&model, &points, image, &options).unwrap();
         assert_eq!(fit.labels.len(), points.len());

@@ -657,6 +657,7 @@ mod tests {
                 ..RefineParams::default()
             }),
             outlier_group: false,
+            erratic_outliers: false,
         };
         let image = Some(ImageSize::new(64.0, 64.0).unwrap());
         let out = fit_seen(&model, &points, &visibility, image, &options).unwrap();

@@ -153,16 +153,24 @@ pub(super) fn far_apart(far: &[usize], rows: &str) -> Option<String> {
 }
 
 /// The warning for tracks the network did not read for moving erratically
-/// ([`screen::erratic_tracks`]), naming the first few by the caller's 0-based row numbers.
-pub(super) fn erratic_apart(erratic: &[usize]) -> Option<String> {
-    not_read(erratic, |count| {
+/// ([`screen::erratic_tracks`]), naming the first few by the caller's 0-based row numbers, and
+/// saying when they are answered −1 (`minus_one`).
+pub(super) fn erratic_apart(erratic: &[usize], minus_one: bool) -> Option<String> {
+    let warning = not_read(erratic, |count| {
         format!(
-            "{count} of the tracks accelerate{} more than {} times the median track and {} times \
-             as fast as tracks move (a tracker that lost its feature)",
+            "{count} of the tracks accelerate{} more than {} times the median track, {} times \
+             as fast as tracks move and {} times as fast as {} (a tracker that lost its feature)",
             if count == 1 { "s" } else { "" },
             screen::ERRATIC_ACCELERATIONS,
             screen::ERRATIC_SPEEDS,
+            screen::ERRATIC_OWN_SPEED,
+            if count == 1 { "it moves" } else { "they move" },
         )
+    })?;
+    Some(match (minus_one, erratic.len()) {
+        (false, _) => warning,
+        (true, 1) => format!("{warning}; it is labelled -1"),
+        (true, _) => format!("{warning}; they are labelled -1"),
     })
 }
 
@@ -222,21 +230,23 @@ mod tests {
 
     #[test]
     fn erratic_tracks_are_named_apart_from_far_rows() {
-        assert_eq!(erratic_apart(&[]), None);
-        let one = erratic_apart(&[7]).unwrap();
+        assert_eq!(erratic_apart(&[], true), None);
+        let one = erratic_apart(&[7], false).unwrap();
         assert!(
             one.starts_with(
-                "1 of the tracks accelerates more than 8 times the median track and 2 times"
+                "1 of the tracks accelerates more than 8 times the median track, 2 times"
             ),
             "{one}"
         );
         assert!(one.ends_with("did not read it: row 7"), "{one}");
         let many: Vec<usize> = (0..12).collect();
-        let text = erratic_apart(&many).unwrap();
+        let text = erratic_apart(&many, true).unwrap();
         assert!(
-            text.contains("rows 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, ..."),
+            text.ends_with("rows 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, ...; they are labelled -1"),
             "{text}"
         );
+        let one = erratic_apart(&[7], true).unwrap();
+        assert!(one.ends_with("row 7; it is labelled -1"), "{one}");
     }
 
     #[test]

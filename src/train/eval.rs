@@ -101,15 +101,31 @@ fn score(
     let clustering = pipeline::cluster(model, embedding, &params)?;
     let score = match (&s.refine, truth) {
         (_, Some(truth)) => truth,
-        (None, None) => Score {
+        (None, None) if embedding.erratic.is_empty() => Score {
             k: clustering.k,
             error: error_rate(&sample.labels, &clustering.labels),
             nmi: nmi(&sample.labels, &clustering.labels),
             outliers: None,
         },
+        // Tracks set apart as erratic are answered -1, as a fit answers them by default.
+        (None, None) => {
+            let mut labels: Vec<i64> = clustering.labels.iter().map(|&l| l as i64).collect();
+            pipeline::erratic_as_outliers(&mut labels, &mut [], &embedding.erratic);
+            let (labels, _) = outliers_as_group(&labels, clustering.k);
+            Score {
+                k: clustering.k,
+                error: error_rate(&sample.labels, &labels),
+                nmi: nmi(&sample.labels, &labels),
+                outliers: None,
+            }
+        }
         (Some(r), None) => {
-            let (_, refined) =
+            let (_, mut refined) =
                 pipeline::refine_chosen(model, &sample.points, embedding, &params, &clustering, r)?;
+            let Refined {
+                labels, structures, ..
+            } = &mut refined;
+            pipeline::erratic_as_outliers(labels, structures, &embedding.erratic);
             refined_score(sample, &refined)
         }
     };

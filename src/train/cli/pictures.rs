@@ -82,6 +82,7 @@ pub fn write(
             symmetries: &model.card.test_symmetries,
             refine: s.refine,
             outlier_group: model.card.outliers,
+            erratic_outliers: true,
         };
         let fit = pipeline::fit(model, &sample.points, sample.image_size, &options).map_err(
             |source| CliError::Sample {
