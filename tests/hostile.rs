@@ -613,10 +613,17 @@ fn cases() -> Vec<Case> {
         .unwrap(),
         Fit(4),
     );
+    // Copies of a point are one point: no two structures to part.
     fit(
         &mut cases,
         "all points identical, k = 2",
         serde_json::to_vec(&good_with(json!({"points": vec![[3.5, -2.25]; 8]}))).unwrap(),
+        Error(422, "invalid_k"),
+    );
+    fit(
+        &mut cases,
+        "all points identical, k = 1",
+        serde_json::to_vec(&good_with(json!({"points": vec![[3.5, -2.25]; 8], "k": 1}))).unwrap(),
         Fit(8),
     );
     fit(

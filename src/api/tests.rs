@@ -68,6 +68,41 @@ fn good() -> Value {
     json!({"kind": "trajectories", "points": tracks(), "k": 2, "seed": 1})
 }
 
+/// Tracks set apart as erratic are answered -1 unless the request says `"outliers": false`
+/// (the card's `outliers`, false for track models, does not count), refined or not; and
+/// `"outliers": true` without refinement is a valid request for tracks.
+#[test]
+fn tracks_answer_erratic_ones_minus_one_unless_the_request_says_outliers_false() {
+    use super::types::FitRequest;
+    let mut model = tiny("tiny", Kind::Trajectories, 4);
+    // As the track models' cards say.
+    model.card.outliers = false;
+    let models = BTreeMap::from([("tiny".to_string(), Arc::new(model))]);
+    let job = |extra: Value| {
+        let mut body = good();
+        body.as_object_mut()
+            .unwrap()
+            .extend(extra.as_object().unwrap().clone());
+        let request: FitRequest = serde_json::from_value(body).unwrap();
+        request.validate(&models, &LIMITS).unwrap()
+    };
+    for (extra, erratic) in [
+        (json!({}), true),
+        (json!({"refine": false}), true),
+        (json!({"refine": true}), true),
+        (json!({"refine": false, "outliers": true}), true),
+        (json!({"refine": true, "outliers": true}), true),
+        (json!({"outliers": false}), false),
+        (json!({"refine": true, "outliers": false}), false),
+    ] {
+        let job = job(extra.clone());
+        assert_eq!(job.erratic_outliers, erratic, "{extra}");
+        if extra.get("refine") == Some(&json!(false)) {
+            assert!(job.refine.is_none(), "{extra}");
+        }
+    }
+}
+
 /// A request body of chunks sent without a length, optionally failing after them.
 struct Chunks {
     chunks: VecDeque<Bytes>,

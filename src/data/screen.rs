@@ -96,6 +96,23 @@ pub fn not_far(n: usize, far: &[usize]) -> Vec<usize> {
     (0..n).filter(|i| far.binary_search(i).is_err()).collect()
 }
 
+/// How many distinct rows `points` holds, counted up to `limit` (the rows are read in order
+/// until `limit` distinct ones are found: O(n · limit) at worst, and O(limit²) where the first
+/// rows differ).
+pub fn distinct_up_to(points: &PointSet, limit: usize) -> usize {
+    let mut seen: Vec<&[f64]> = Vec::with_capacity(limit);
+    for i in 0..points.len() {
+        if seen.len() >= limit {
+            break;
+        }
+        let row = points.row(i);
+        if !seen.contains(&row) {
+            seen.push(row);
+        }
+    }
+    seen.len()
+}
+
 /// The first row of each group of equal rows of `points`, ascending.
 pub fn distinct_rows(points: &PointSet) -> Vec<usize> {
     let n = points.len();
@@ -328,54 +345,39 @@ pub(crate) mod tests {
         assert!(!screened.read.unwrap().contains(&60));
     }
 
-    #[test]
-    fn smooth_tracks_that_accelerate_more_than_most_are_not_erratic() {
-        // A drive's view: 80 background tracks flowing out at 1 to 9 px a frame with 0.05 px
-        // of acceleration, and 8 near points that accelerate 20 times as much (1 px a frame²)
-        // while moving 12 px a frame: smooth motion, far below its speed.
-        let rows: Vec<f64> = (0..88)
+    /// A drive's view over 5 frames: 80 background tracks flowing out at 1 to 9 px a frame
+    /// with 0.05 px a frame² of acceleration, then `near` tracks of points near the camera
+    /// moving `speed` px a frame and accelerating `accel` px a frame², smoothly.
+    fn drive(near: usize, speed: f64, accel: f64) -> PointSet {
+        let rows: Vec<f64> = (0..80 + near)
             .flat_map(|i| {
-                let near = i >= 80;
-                let speed = if near { 12.0 } else { 1.0 + (i % 9) as f64 };
-                let accel = if near {
-                    1.0
-                } else {
-                    0.05 * ((i % 3) as f64 - 1.0)
+                let (v, a) = match i >= 80 {
+                    true => (speed, accel),
+                    false => (1.0 + (i % 9) as f64, 0.05 * ((i % 3) as f64 - 1.0)),
                 };
                 let (x0, y0) = (7.0 * (i % 11) as f64, 5.0 * (i / 11) as f64);
                 (0..5).flat_map(move |t| {
                     let t = t as f64;
-                    [x0 + speed * t + 0.5 * accel * t * t, y0 + 0.3 * speed * t]
+                    [x0 + v * t + 0.5 * a * t * t, y0 + 0.3 * v * t]
                 })
             })
             .collect();
-        let drive = PointSet::from_flat(Kind::Trajectories, 10, rows).unwrap();
-        assert!(erratic_tracks(&drive).is_empty());
+        PointSet::from_flat(Kind::Trajectories, 10, rows).unwrap()
+    }
+
+    #[test]
+    fn smooth_tracks_that_accelerate_more_than_most_are_not_erratic() {
+        // 8 near points accelerating 20 times as much as the background (1 px a frame²) while
+        // moving 12 px a frame: smooth motion, far below its speed.
+        assert!(erratic_tracks(&drive(8, 12.0, 1.0)).is_empty());
     }
 
     #[test]
     fn fast_smooth_tracks_near_a_moving_camera_are_not_erratic() {
-        // 80 background tracks at 1 to 9 px a frame, and 6 near points moving 80 px a frame
-        // and accelerating 25 px a frame²: ten times the typical speed, but a third of their
-        // own (perspective bending a near point's track as the camera drives past).
-        let rows: Vec<f64> = (0..86)
-            .flat_map(|i| {
-                let near = i >= 80;
-                let speed = if near { 80.0 } else { 1.0 + (i % 9) as f64 };
-                let accel = if near {
-                    25.0
-                } else {
-                    0.05 * ((i % 3) as f64 - 1.0)
-                };
-                let (x0, y0) = (7.0 * (i % 11) as f64, 5.0 * (i / 11) as f64);
-                (0..5).flat_map(move |t| {
-                    let t = t as f64;
-                    [x0 + speed * t + 0.5 * accel * t * t, y0 + 0.3 * speed * t]
-                })
-            })
-            .collect();
-        let drive = PointSet::from_flat(Kind::Trajectories, 10, rows).unwrap();
-        assert!(erratic_tracks(&drive).is_empty());
+        // 6 near points moving 80 px a frame and accelerating 25 px a frame²: ten times the
+        // typical speed, but a third of their own (perspective bending a near point's track as
+        // the camera drives past).
+        assert!(erratic_tracks(&drive(6, 80.0, 25.0)).is_empty());
     }
 
     #[test]

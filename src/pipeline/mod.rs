@@ -579,9 +579,6 @@ pub fn refine(
                 .map(|s| (s.model.residual(rows.points.row(i)), s.label as i64))
                 .min_by(|a, b| a.0.total_cmp(&b.0));
             all[i] = nearest.map_or(-1, |(_, l)| l);
-            if let Some((_, l)) = nearest {
-                refined.structures[l as usize].inliers += 1;
-            }
         }
     }
     refined.labels = all;
@@ -791,7 +788,10 @@ fn fit_counting(
     let t0 = Instant::now();
     let embedding = embed(model, points, image, symmetries, params.seed())?;
     let read = embedding.values.len() / embedding.width.max(1);
+    // Copies of a point are one point: a set of fewer distinct rows than a set needs is read
+    // as sent, so `read` alone would not show them.
     if let Selection::Fixed(k) = params.selection()
+        && let read = read.min(screen::distinct_up_to(points, k))
         && k > read
     {
         return Err(FitError::KAboveRead {
@@ -893,8 +893,9 @@ fn fit_counting(
     };
     let (mut labels, mut structures) = (labels, structures);
     if erratic_outliers {
-        erratic_as_outliers(&mut labels, &mut structures, &embedding.erratic);
+        erratic_as_outliers(&mut labels, &embedding.erratic);
     }
+    count_joined(points, &embedding.far, &labels, &mut structures);
     let t3 = Instant::now();
     // Whether this fit may answer -1: refinement with outliers, a model whose outlier group is
     // answered apart, or erratic tracks answered -1.
@@ -989,17 +990,30 @@ fn the_outlier_group(
     )
 }
 
-/// The tracks set apart as erratic (`erratic`, ascending rows) answered −1, each taken off the
-/// structure it was joined to (with refinement; none without). A far row joins a structure, or
-/// takes a read row's label, only after the groups are made, so no group loses its last point.
-pub fn erratic_as_outliers(labels: &mut [i64], structures: &mut [Structure], erratic: &[usize]) {
+/// The tracks set apart as erratic (`erratic`, rows) answered −1. A far row takes a read row's
+/// label, or joins a structure, only after the groups are made and the structures fitted, so no
+/// group loses a point it was made of.
+pub fn erratic_as_outliers(labels: &mut [i64], erratic: &[usize]) {
     for &i in erratic {
-        if let Ok(l) = usize::try_from(labels[i]) {
-            if let Some(s) = structures.get_mut(l) {
-                s.inliers = s.inliers.saturating_sub(1);
-            }
-            labels[i] = -1;
-        }
+        labels[i] = -1;
+    }
+}
+
+/// The far rows (`far`) that refinement joined to a structure (outliers off, [`refine`]) counted
+/// in that structure's `inliers` and `rms`, as every point labelled with it is: the structures
+/// were fitted, and their noise judged, without them.
+fn count_joined(points: &PointSet, far: &[usize], labels: &[i64], structures: &mut [Structure]) {
+    for &i in far {
+        let Some(s) = usize::try_from(labels[i])
+            .ok()
+            .and_then(|l| structures.get_mut(l))
+        else {
+            continue;
+        };
+        let r = s.model.residual(points.row(i));
+        let n = s.inliers as f64;
+        s.rms = ((s.rms * s.rms * n + r * r) / (n + 1.0)).sqrt();
+        s.inliers += 1;
     }
 }
 
@@ -1384,6 +1398,44 @@ pub(crate) mod tests {
         assert!(
             message.contains("thins") && message.contains("300"),
             "{message}"
+        );
+    }
+
+    #[test]
+    fn k_above_the_distinct_rows_is_refused_even_where_every_row_is_read() {
+        use crate::registry::tests::tiny_model;
+        let model = tiny_model("tracks", Kind::Trajectories, 4, 3);
+        // Ten copies of one track, then two copies of a second one.
+        let rows = |copies: &[(usize, f64)]| {
+            let values = copies
+                .iter()
+                .flat_map(|&(n, x)| std::iter::repeat_n([x, 0.0, x + 1.0, 0.5], n).flatten())
+                .collect();
+            PointSet::from_flat(Kind::Trajectories, 4, values).unwrap()
+        };
+        let one = rows(&[(10, 1.0)]);
+        match fit(&model, &one, None, &unrefined(&fixed(2))) {
+            Err(FitError::KAboveRead {
+                k: 2,
+                read: 1,
+                n: 10,
+                ..
+            }) => {}
+            other => panic!("{other:?}"),
+        }
+        let two = rows(&[(10, 1.0), (2, 5.0)]);
+        assert!(fit(&model, &two, None, &unrefined(&fixed(2))).is_ok());
+        assert!(matches!(
+            fit(&model, &two, None, &unrefined(&fixed(3))),
+            Err(FitError::KAboveRead { read: 2, .. })
+        ));
+        // K chosen: the copies are answered alike.
+        let chosen = ClusterParams::builder().k_max(3).build().unwrap();
+        let fit = fit(&model, &one, None, &unrefined(&chosen)).unwrap();
+        assert!(
+            fit.labels.iter().all(|&l| l == fit.labels[0]),
+            "{:?}",
+            fit.labels
         );
     }
 

@@ -110,7 +110,7 @@ fn score(
         // Tracks set apart as erratic are answered -1, as a fit answers them by default.
         (None, None) => {
             let mut labels: Vec<i64> = clustering.labels.iter().map(|&l| l as i64).collect();
-            pipeline::erratic_as_outliers(&mut labels, &mut [], &embedding.erratic);
+            pipeline::erratic_as_outliers(&mut labels, &embedding.erratic);
             let (labels, _) = outliers_as_group(&labels, clustering.k);
             Score {
                 k: clustering.k,
@@ -122,10 +122,7 @@ fn score(
         (Some(r), None) => {
             let (_, mut refined) =
                 pipeline::refine_chosen(model, &sample.points, embedding, &params, &clustering, r)?;
-            let Refined {
-                labels, structures, ..
-            } = &mut refined;
-            pipeline::erratic_as_outliers(labels, structures, &embedding.erratic);
+            pipeline::erratic_as_outliers(&mut refined.labels, &embedding.erratic);
             refined_score(sample, &refined)
         }
     };
