@@ -51,19 +51,20 @@ pub struct Screened {
 }
 
 /// `points` `[n, d]` -> the rows to read: less the far ones ([`far_rows`]) and the erratic
-/// tracks ([`erratic_tracks`] of `read`, the same rows at the frames the network reads: over a
-/// whole drive, perspective bends a near point's track far more than the median track's), and,
+/// tracks ([`erratic_in_windows`] of `windows`, the same rows at each window of frames the
+/// network reads: over a whole drive, perspective bends a near point's track far more than the
+/// median track's), and,
 /// for a network that reads `neighbourhoods`, the first of each group of equal rows only; every
 /// row where fewer than [`MIN_POINTS`] rows are distinct.
-pub fn screen(points: &PointSet, neighbourhoods: bool, read: &PointSet) -> Screened {
+pub fn screen(points: &PointSet, neighbourhoods: bool, windows: &[PointSet]) -> Screened {
     let distinct = if neighbourhoods {
         distinct_rows(points)
     } else {
         (0..points.len()).collect()
     };
     let mut far = far_rows(points, &distinct);
-    let erratic = if read.len() == points.len() {
-        erratic_tracks(read)
+    let erratic = if windows.iter().all(|w| w.len() == points.len()) {
+        erratic_in_windows(windows)
     } else {
         Vec::new()
     };
@@ -231,9 +232,36 @@ pub const ERRATIC_OWN_SPEED: f64 = 0.7;
 /// speed (the median over tracks of each one's mean speed) and [`ERRATIC_OWN_SPEED`] times its
 /// own mean speed: a moving object's tracks accelerate more than the background's, but far less
 /// than they move. At most [`MAX_FAR_SHARE`] of the
-/// tracks, the most erratic first; none in other kinds or where the median track does not
+/// tracks, those farthest above their highest bar first; none in other kinds or where the median track does not
 /// accelerate at all (noise-free input, where any motion would count as erratic).
 pub fn erratic_tracks(points: &PointSet) -> Vec<usize> {
+    erratic_in_windows(std::slice::from_ref(points))
+}
+
+/// [`erratic_tracks`] over several windows of frames of the same tracks: a track is erratic
+/// where it is in some window; where more than [`MAX_FAR_SHARE`] are, those farthest above their
+/// highest bar (in any window) are kept. Ascending.
+pub fn erratic_in_windows(windows: &[PointSet]) -> Vec<usize> {
+    let Some(n) = windows.first().map(PointSet::len) else {
+        return Vec::new();
+    };
+    let most = (MAX_FAR_SHARE * n as f64).floor() as usize;
+    let mut above = vec![0.0f64; n];
+    for window in windows {
+        for (i, ratio) in erratic_ratios(window) {
+            above[i] = above[i].max(ratio);
+        }
+    }
+    let mut erratic: Vec<usize> = (0..n).filter(|&i| above[i] > 1.0).collect();
+    erratic.sort_unstable_by(|&a, &b| above[b].total_cmp(&above[a]).then(a.cmp(&b)));
+    erratic.truncate(most);
+    erratic.sort_unstable();
+    erratic
+}
+
+/// The erratic tracks of one window ([`erratic_tracks`]), each with its RMS acceleration over
+/// its highest bar (above 1), in no order.
+fn erratic_ratios(points: &PointSet) -> Vec<(usize, f64)> {
     let n = points.len();
     let frames = points.dim() / 2;
     let most = (MAX_FAR_SHARE * n as f64).floor() as usize;
@@ -277,13 +305,10 @@ pub fn erratic_tracks(points: &PointSet) -> Vec<usize> {
         return Vec::new();
     }
     let bar = (ERRATIC_ACCELERATIONS * typical).max(ERRATIC_SPEEDS * speed);
-    let mut erratic: Vec<usize> = (0..n)
-        .filter(|&i| rms[i] > bar && rms[i] > ERRATIC_OWN_SPEED * speeds[i])
-        .collect();
-    erratic.sort_unstable_by(|&a, &b| rms[b].total_cmp(&rms[a]).then(a.cmp(&b)));
-    erratic.truncate(most);
-    erratic.sort_unstable();
-    erratic
+    (0..n)
+        .map(|i| (i, rms[i] / bar.max(ERRATIC_OWN_SPEED * speeds[i])))
+        .filter(|&(_, ratio)| ratio > 1.0)
+        .collect()
 }
 
 #[cfg(test)]
@@ -339,10 +364,29 @@ pub(crate) mod tests {
         assert_eq!(erratic_tracks(&tracks(10)).len(), 3);
         // They are not read, and are named apart from the far rows.
         let with = tracks(2);
-        let screened = screen(&with, true, &with);
+        let screened = screen(&with, true, std::slice::from_ref(&with));
         assert_eq!(screened.erratic, vec![60, 61]);
         assert_eq!(screened.far, vec![60, 61]);
         assert!(!screened.read.unwrap().contains(&60));
+    }
+
+    #[test]
+    fn a_track_erratic_in_any_window_read_is_erratic() {
+        // The first window: 60 smooth tracks and two more that follow tracks 0 and 1 a few
+        // pixels off; the second: the same 60, and the two wander.
+        let smooth = tracks(0);
+        let mut values = smooth.values().to_vec();
+        for i in [0, 1] {
+            values.extend(smooth.row(i).iter().map(|v| v + 3.0));
+        }
+        let first = PointSet::from_flat(Kind::Trajectories, 10, values).unwrap();
+        let second = tracks(2);
+        assert!(erratic_tracks(&first).is_empty());
+        assert_eq!(
+            erratic_in_windows(&[first.clone(), second.clone()]),
+            vec![60, 61]
+        );
+        assert_eq!(erratic_in_windows(&[second, first]), vec![60, 61]);
     }
 
     /// A drive's view over 5 frames: 80 background tracks flowing out at 1 to 9 px a frame
@@ -408,7 +452,7 @@ pub(crate) mod tests {
 
     /// [`screen`] for a network that reads neighbourhoods.
     fn screen_n(points: &PointSet) -> Screened {
-        screen(points, true, points)
+        screen(points, true, std::slice::from_ref(points))
     }
 
     fn set(rows: &[[f64; 2]]) -> PointSet {
@@ -459,7 +503,7 @@ pub(crate) mod tests {
         rows.extend(circle());
         rows.push([1e6, 1e6]);
         let points = set(&rows);
-        let screened = screen(&points, false, &points);
+        let screened = screen(&points, false, std::slice::from_ref(&points));
         assert_eq!(screened.far, [400]);
         assert_eq!(screened.read.unwrap(), (0..400).collect::<Vec<_>>());
     }

@@ -234,11 +234,11 @@ struct ReadPlan {
 /// record their training spacing ([`density::reading`]), a set denser than training at a seeded
 /// subset, one sparser than the card's sparse network's threshold by that network. Rows not
 /// read take their nearest read row's embedding. `whole` is the set as sent (rows compared over
-/// every frame), `read` the same rows at the model's frames.
+/// every frame), `windows` the same rows at each window of the model's frames it reads.
 fn read_plan(
     model: &LoadedModel,
     whole: &PointSet,
-    read: &PointSet,
+    windows: &[PointSet],
     image: Option<ImageSize>,
     seed: u64,
 ) -> Result<ReadPlan, FitError> {
@@ -248,7 +248,8 @@ fn read_plan(
         read: kept,
         far,
         erratic,
-    } = screen(whole, neighbourhoods, read);
+    } = screen(whole, neighbourhoods, windows);
+    let read = &windows[0];
     let Some(trained) = card.spacing else {
         return Ok(ReadPlan {
             thinned: kept
@@ -405,7 +406,7 @@ pub fn embed(
         sparse,
         far,
         erratic,
-    } = read_plan(model, &points, &windows[0], image, seed)?;
+    } = read_plan(model, &points, &windows, image, seed)?;
     let (rows, owner) = thinned.unzip();
     // The windows side by side on the model's threads (each one's neighbour searches run on
     // one thread; its forward pass spreads over all of them).
