@@ -1071,7 +1071,7 @@ fn both_ks(first: &Clustering, mut wider: Clustering) -> Clustering {
 
 impl LoadedModel {
     /// [`fit`] with the card's test-time symmetries, without refinement: the learned clustering
-    /// (a K given is the number of groups, no outlier group set apart).
+    /// (a K given is the number of groups, no outlier group set apart, erratic tracks labelled).
     pub fn fit(
         &self,
         points: &PointSet,
