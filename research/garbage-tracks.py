@@ -6,14 +6,16 @@ right only when answered -1), and over the real tracks alone (how much the garba
 and, without garbage, how many real tracks the fits' warnings count as erratic (not read by
 the network).
 
-    python3 research/garbage-tracks.py PORT SHARE [DATA [FROM]]
+    python3 research/garbage-tracks.py PORT SHARE [DATA [FROM [partly]]]
 
 PORT: a server on the fold models (`multifit-server --models runs/cv/kt-pretrained/models`,
 which names each `fold-<sequence>`); SHARE: garbage tracks as a share of the real ones (0 for
 none); DATA: default ../shared/datasets/kt3dmoseg_first5 (a set with `visible` masks, such as
 ../shared/datasets/kt3dmoseg, is read on its tracks seen in every frame); FROM (default 0): the
 frame from which a garbage track wanders (at most the third from last), following a real track
-(drawn at random) before it, as a tracker that loses its feature part-way. Standard library only."""
+(drawn at random) before it, as a tracker that loses its feature part-way. With `partly` (a set
+with `visible` masks), every track is sent with its mask, and each garbage track is seen in one
+run of 10 frames (or all, if fewer) at a random place, wandering there. Standard library only."""
 import glob, json, random, re, statistics, sys
 
 from fitting import error, error_minus_one, post
@@ -46,21 +48,39 @@ def main():
     port, share = sys.argv[1], float(sys.argv[2])
     data = sys.argv[3] if len(sys.argv) > 3 else "../shared/datasets/kt3dmoseg_first5"
     start = int(sys.argv[4]) if len(sys.argv) > 4 else 0
+    partly = len(sys.argv) > 5 and sys.argv[5] == "partly"
     every, real, flagged, total = [], [], 0, 0
     for path in sorted(glob.glob(f"{data}/*.json")):
         seq = json.load(open(path))
-        rows, truth = seq["points"], seq["labels"]
-        if "visible" in seq:
+        rows, truth, visible = seq["points"], seq["labels"], None
+        if "visible" in seq and not partly:
             seen = [i for i, v in enumerate(seq["visible"]) if all(v)]
             rows, truth = [rows[i] for i in seen], [truth[i] for i in seen]
+        elif partly:
+            visible = [[int(bool(f)) for f in v] for v in seq["visible"]]
         width, height = seq["image_size"]
-        walks = garbage(rows, share, width, height, random.Random(seq["name"]), start)
-        answer = post(port, {"model": f"fold-{seq['name']}", "kind": "trajectories",
-                             "points": rows + walks, "image_size": [width, height],
-                             "k": len(set(truth))})
+        rng = random.Random(seq["name"])
+        if partly:
+            complete = [r for r, v in zip(rows, visible) if all(v)]
+            frames = len(visible[0])
+            run = min(10, frames)
+            walks, masks = [], []
+            for walk in garbage(complete, share, width, height, rng):
+                at = rng.randrange(frames - run + 1)
+                mask = [int(at <= f < at + run) for f in range(frames)]
+                walks.append([v if mask[j // 2] else 0.0 for j, v in enumerate(walk)])
+                masks.append(mask)
+            visible = visible + masks
+        else:
+            walks = garbage(rows, share, width, height, rng, start)
+        body = {"model": f"fold-{seq['name']}", "kind": "trajectories",
+                "points": rows + walks, "image_size": [width, height], "k": len(set(truth))}
+        if visible is not None:
+            body["visible"] = visible
+        answer = post(port, body)
         labels = answer["labels"]
         for warning in answer["warnings"]:
-            count = re.match(r"(\d+) of the tracks accelerate", warning)
+            count = re.match(r"(\d+) of the (?:partly seen )?tracks accelerate", warning)
             flagged += int(count.group(1)) if count else 0
         total += len(rows)
         every.append(error_minus_one(truth + [0] * len(walks), labels))
