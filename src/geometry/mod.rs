@@ -200,6 +200,39 @@ impl Model {
         }
     }
 
+    /// The model of two-view rows `[x1 + o1, y1 + o1', x2 + o2, y2 + o2']` for this model of
+    /// rows `[x1, y1, x2, y2]`: each view moved back by its shift (`o1`, `o2`).
+    /// H -> T(o2)·H·T(−o1), F -> T(−o2)ᵀ·F·T(−o1), an affinity's translation by o2 − A·o1.
+    pub fn views_unshifted(&self, o1: [f64; 2], o2: [f64; 2]) -> Model {
+        let t = |[x, y]: [f64; 2]| -> linalg::Mat3 { [1.0, 0.0, x, 0.0, 1.0, y, 0.0, 0.0, 1.0] };
+        let t_transposed =
+            |[x, y]: [f64; 2]| -> linalg::Mat3 { [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, x, y, 1.0] };
+        let [back1, back2] = [[-o1[0], -o1[1]], [-o2[0], -o2[1]]];
+        match self {
+            Model::Homography { h } => {
+                let moved = linalg::mat3_mul(&linalg::mat3_mul(&t(o2), h), &t(back1));
+                linalg::unit_norm_sign(&moved)
+                    .map_or_else(|| self.clone(), |h| Model::Homography { h })
+            }
+            Model::Fundamental { f } => {
+                let moved = linalg::mat3_mul(&linalg::mat3_mul(&t_transposed(back2), f), &t(back1));
+                linalg::unit_norm_sign(&moved)
+                    .map_or_else(|| self.clone(), |f| Model::Fundamental { f })
+            }
+            Model::Affine { a } => Model::Affine {
+                a: [
+                    a[0],
+                    a[1],
+                    a[2] + o2[0] - a[0] * o1[0] - a[1] * o1[1],
+                    a[3],
+                    a[4],
+                    a[5] + o2[1] - a[3] * o1[0] - a[4] * o1[1],
+                ],
+            },
+            other => other.clone(),
+        }
+    }
+
     /// The wire name of the model's type (`"line"`, `"circle"`, ...).
     pub fn type_name(&self) -> &'static str {
         match self {
@@ -527,6 +560,72 @@ mod tests {
                 reason: "all points coincide".into(),
             },
         ]
+    }
+
+    #[test]
+    fn models_fitted_on_shifted_views_fit_the_views_as_sent() {
+        // Correspondences 3e7 px from the origin in both views: fitted as sent, a homography
+        // is too ill-conditioned to invert; fitted with each view shifted back, and brought
+        // back, it maps the pairs as sent.
+        let (o1, o2) = ([3e7, -3e7], [3e7 + 512.0, 2e7]);
+        let h = [1.1, 0.05, 12.0, -0.03, 0.95, -7.0, 2e-4, -1e-4, 1.0];
+        let a = [0.9, 0.1, 15.0, -0.2, 1.05, 4.0];
+        let affine_h = [a[0], a[1], a[2], a[3], a[4], a[5], 0.0, 0.0, 1.0];
+        let pairs_of = |m: &[f64; 9]| -> Vec<[f64; 4]> {
+            (0..12)
+                .map(|i| {
+                    let (x, y) = (40.0 * (i % 4) as f64 + 50.0, 60.0 * (i / 4) as f64 + 30.0);
+                    let w = m[6] * x + m[7] * y + m[8];
+                    [
+                        x,
+                        y,
+                        (m[0] * x + m[1] * y + m[2]) / w,
+                        (m[3] * x + m[4] * y + m[5]) / w,
+                    ]
+                })
+                .collect()
+        };
+        for (truth, pairs) in [
+            (Model::Homography { h }, pairs_of(&h)),
+            (Model::Affine { a }, pairs_of(&affine_h)),
+        ] {
+            let rows: Vec<Vec<f64>> = pairs.iter().map(|p| p.to_vec()).collect();
+            let refs: Vec<&[f64]> = rows.iter().map(Vec::as_slice).collect();
+            let fitted = fit_type(truth.type_name(), &refs).unwrap().model;
+            let back = fitted.views_unshifted(o1, o2);
+            for p in &pairs {
+                let sent = [p[0] + o1[0], p[1] + o1[1], p[2] + o2[0], p[3] + o2[1]];
+                // Measured at 3e7 px, the residual carries the rounding of a map that far out
+                // (a wrong shift would miss by thousands of pixels).
+                let r = back.residual(&sent);
+                assert!(r < 0.1, "{}: {r}", truth.type_name());
+            }
+        }
+        // x₂ᵀ·F·x₁ = (x₂ − o₂)ᵀ·F'·(x₁ − o₁): one ratio for every pair (F's gauge).
+        let f_shifted = [0.0, -1e-3, 0.2, 1e-3, 0.0, -0.3, -0.2, 0.3, 0.0];
+        let (o1, o2) = ([1000.0, -2000.0], [300.0, 700.0]);
+        let Model::Fundamental { f } =
+            (Model::Fundamental { f: f_shifted }).views_unshifted(o1, o2)
+        else {
+            panic!("not a fundamental matrix");
+        };
+        let epi = |f: &[f64; 9], [x, y, u, v]: [f64; 4]| {
+            u * (f[0] * x + f[1] * y + f[2])
+                + v * (f[3] * x + f[4] * y + f[5])
+                + (f[6] * x + f[7] * y + f[8])
+        };
+        let ratios: Vec<f64> = [[10.0, 20.0, 300.0, 40.0], [-5.0, 7.0, 12.0, 640.0]]
+            .into_iter()
+            .map(|p| {
+                let sent = [p[0] + o1[0], p[1] + o1[1], p[2] + o2[0], p[3] + o2[1]];
+                epi(&f, sent) / epi(&f_shifted, p)
+            })
+            .collect();
+        assert!(ratios[0].is_finite() && ratios[0] != 0.0);
+        assert!(
+            (ratios[0] - ratios[1]).abs() < 1e-9 * ratios[0].abs(),
+            "{ratios:?}"
+        );
     }
 
     #[test]

@@ -748,7 +748,16 @@ fn fit_sent(
     // the structures come back in each image's own pixels. Anything else, or a move out of the
     // accepted range (which the API refuses), is fitted as sent.
     let Some(size) = image else {
-        return as_sent();
+        // Far from the origin, a homography in the caller's pixels is too ill-conditioned to
+        // invert: the fit runs with each view moved to its centroid.
+        let Some((o1, o2, moved)) = views_centred(points) else {
+            return as_sent();
+        };
+        let mut outcome = fit_counting(model, &moved, None, options, "points", None)?;
+        for s in &mut outcome.structures {
+            s.model = s.model.views_unshifted(o1, o2);
+        }
+        return Ok(outcome);
     };
     let (Some((scale, shift)), (Cow::Owned(moved), first)) =
         (size.second_view_move(), size.in_first_frame(points))
@@ -762,6 +771,52 @@ fn fit_sent(
     // Each image's span, in its own pixels.
     outcome.warnings.extend(image_warnings(points, image));
     Ok(outcome)
+}
+
+/// A view whose centroid lies farther from the origin than this many times its RMS spread is
+/// fitted moved to its centroid ([`views_centred`]).
+pub const FAR_FROM_ORIGIN: f64 = 10.0;
+
+/// Correspondences whose centroid in either view lies more than [`FAR_FROM_ORIGIN`] times that
+/// view's RMS spread from the origin, moved by each view's centroid rounded to whole units (an
+/// exact shift of every coordinate): (shift of view 1, of view 2, the moved rows). `None` for
+/// other kinds, or where both views are near the origin (the set is fitted as sent).
+fn views_centred(points: &PointSet) -> Option<([f64; 2], [f64; 2], PointSet)> {
+    if points.kind() != Kind::Correspondences || points.is_empty() {
+        return None;
+    }
+    let n = points.len() as f64;
+    let view = |v: usize| -> ([f64; 2], f64) {
+        let mean = [0, 1].map(|c| {
+            (0..points.len())
+                .map(|i| points.row(i)[2 * v + c])
+                .sum::<f64>()
+                / n
+        });
+        let spread = ((0..points.len())
+            .map(|i| {
+                let r = points.row(i);
+                (r[2 * v] - mean[0]).powi(2) + (r[2 * v + 1] - mean[1]).powi(2)
+            })
+            .sum::<f64>()
+            / n)
+            .sqrt();
+        (mean, spread)
+    };
+    let ((m1, s1), (m2, s2)) = (view(0), view(1));
+    let far = |m: [f64; 2], s: f64| m[0].hypot(m[1]) > FAR_FROM_ORIGIN * s;
+    if !far(m1, s1) && !far(m2, s2) {
+        return None;
+    }
+    let (o1, o2) = (m1.map(f64::round), m2.map(f64::round));
+    let values = (0..points.len())
+        .flat_map(|i| {
+            let r = points.row(i);
+            [r[0] - o1[0], r[1] - o1[1], r[2] - o2[0], r[3] - o2[1]]
+        })
+        .collect();
+    let moved = PointSet::from_flat(Kind::Correspondences, 4, values).ok()?;
+    Some((o1, o2, moved))
 }
 
 /// [`fit`], its warnings naming the rows of `points` as `rows` ("points", or the tracks seen
@@ -1400,6 +1455,45 @@ pub(crate) mod tests {
             message.contains("thins") && message.contains("300"),
             "{message}"
         );
+    }
+
+    #[test]
+    fn correspondences_far_from_the_origin_are_fitted_centred_on_each_view() {
+        let pairs = |o: f64| {
+            let values = (0..20)
+                .flat_map(|i| {
+                    let (x, y) = ((i % 5) as f64 * 30.0, (i / 5) as f64 * 40.0);
+                    [x + o, y + o, x + 0.5 * y + 2.0 * o, y + 7.0 + o]
+                })
+                .collect();
+            PointSet::from_flat(Kind::Correspondences, 4, values).unwrap()
+        };
+        // Near the origin (within 10 spreads): fitted as sent.
+        assert!(views_centred(&pairs(100.0)).is_none());
+        assert!(
+            views_centred(&PointSet::from_flat(Kind::Points2d, 2, vec![1e9; 20]).unwrap())
+                .is_none()
+        );
+        // Far: each view moved by its centroid rounded to whole pixels, exactly.
+        let (o1, o2, moved) = views_centred(&pairs(1e7)).unwrap();
+        assert_eq!(o1, [1e7 + 60.0, 1e7 + 60.0]);
+        assert_eq!(o2, [2e7 + 90.0, 1e7 + 67.0]);
+        assert_eq!(moved.row(0), &[-60.0, -60.0, -90.0, -60.0]);
+        // The far set is answered as its centred rows are, its structures moved back.
+        let model = crate::registry::tests::tiny_model("pairs", Kind::Correspondences, 4, 3);
+        let params = fixed(2);
+        let options = FitOptions {
+            refine: Some(RefineParams::default()),
+            ..unrefined(&params)
+        };
+        let far = fit(&model, &pairs(1e7), None, &options).unwrap();
+        let centred = fit(&model, &moved, None, &options).unwrap();
+        assert_eq!(far.labels, centred.labels);
+        assert!(!far.structures.is_empty());
+        for (f, c) in far.structures.iter().zip(&centred.structures) {
+            assert_eq!(f.model, c.model.views_unshifted(o1, o2));
+            assert_eq!((f.inliers, f.rms), (c.inliers, c.rms));
+        }
     }
 
     #[test]
