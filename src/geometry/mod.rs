@@ -173,60 +173,50 @@ impl Prepared<'_> {
     }
 }
 
-impl Model {
-    /// The model of a correspondence fitted with its second view moved by x' = s·x + t, in the
-    /// second view's own coordinates x = (x' − t) / s, A = [[s, 0, tx], [0, s, ty], [0, 0, 1]]:
-    /// H = A⁻¹·H' and F = Aᵀ·F' (each in its gauge: ‖·‖ = 1, last entry positive), the affine
-    /// map's rows divided by s after t is taken off. Other models are of one view: unchanged.
-    pub fn second_view_unmoved(&self, s: f64, [tx, ty]: [f64; 2]) -> Model {
-        let a_inv: linalg::Mat3 = [1.0 / s, 0.0, -tx / s, 0.0, 1.0 / s, -ty / s, 0.0, 0.0, 1.0];
-        let a_t: linalg::Mat3 = [s, 0.0, 0.0, 0.0, s, 0.0, tx, ty, 1.0];
-        match self {
-            Model::Homography { h } => linalg::unit_norm_sign(&linalg::mat3_mul(&a_inv, h))
-                .map_or_else(|| self.clone(), |h| Model::Homography { h }),
-            Model::Fundamental { f } => linalg::unit_norm_sign(&linalg::mat3_mul(&a_t, f))
-                .map_or_else(|| self.clone(), |f| Model::Fundamental { f }),
-            Model::Affine { a } => Model::Affine {
-                a: [
-                    a[0] / s,
-                    a[1] / s,
-                    (a[2] - tx) / s,
-                    a[3] / s,
-                    a[4] / s,
-                    (a[5] - ty) / s,
-                ],
-            },
-            other => other.clone(),
-        }
-    }
+/// How one view of a correspondence was moved before a fit: x' = scale·x + shift.
+pub type ViewMove = (f64, [f64; 2]);
+/// A view left as sent.
+pub const UNMOVED: ViewMove = (1.0, [0.0, 0.0]);
 
-    /// The model of two-view rows `[x1 + o1, y1 + o1', x2 + o2, y2 + o2']` for this model of
-    /// rows `[x1, y1, x2, y2]`: each view moved back by its shift (`o1`, `o2`).
-    /// H -> T(o2)·H·T(−o1), F -> T(−o2)ᵀ·F·T(−o1), an affinity's translation by o2 − A·o1.
-    pub fn views_unshifted(&self, o1: [f64; 2], o2: [f64; 2]) -> Model {
-        let t = |[x, y]: [f64; 2]| -> linalg::Mat3 { [1.0, 0.0, x, 0.0, 1.0, y, 0.0, 0.0, 1.0] };
-        let t_transposed =
-            |[x, y]: [f64; 2]| -> linalg::Mat3 { [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, x, y, 1.0] };
-        let [back1, back2] = [[-o1[0], -o1[1]], [-o2[0], -o2[1]]];
+impl Model {
+    /// The model of correspondences in the caller's coordinates, for this model fitted with
+    /// each view v moved by x' = s_v·x + t_v (`moves`, [`UNMOVED`] for a view left as sent):
+    /// with A_v = [[s_v, 0, t_vx], [0, s_v, t_vy], [0, 0, 1]], H = A₂⁻¹·H'·A₁ and
+    /// F = A₂ᵀ·F'·A₁ (each in its gauge: ‖·‖ = 1, last entry positive); an affine map's linear
+    /// part L' times s₁ / s₂ and its translation (c' − t₂ + L'·t₁) / s₂. Models of one view:
+    /// unchanged.
+    pub fn views_unmoved(&self, [(s1, t1), (s2, t2)]: [ViewMove; 2]) -> Model {
+        let a1: linalg::Mat3 = [s1, 0.0, t1[0], 0.0, s1, t1[1], 0.0, 0.0, 1.0];
+        let unmoved = |m: &linalg::Mat3, second: &linalg::Mat3| {
+            linalg::unit_norm_sign(&linalg::mat3_mul(&linalg::mat3_mul(second, m), &a1))
+        };
         match self {
             Model::Homography { h } => {
-                let moved = linalg::mat3_mul(&linalg::mat3_mul(&t(o2), h), &t(back1));
-                linalg::unit_norm_sign(&moved)
-                    .map_or_else(|| self.clone(), |h| Model::Homography { h })
+                let a2_inv = [
+                    1.0 / s2,
+                    0.0,
+                    -t2[0] / s2,
+                    0.0,
+                    1.0 / s2,
+                    -t2[1] / s2,
+                    0.0,
+                    0.0,
+                    1.0,
+                ];
+                unmoved(h, &a2_inv).map_or_else(|| self.clone(), |h| Model::Homography { h })
             }
             Model::Fundamental { f } => {
-                let moved = linalg::mat3_mul(&linalg::mat3_mul(&t_transposed(back2), f), &t(back1));
-                linalg::unit_norm_sign(&moved)
-                    .map_or_else(|| self.clone(), |f| Model::Fundamental { f })
+                let a2_t = [s2, 0.0, 0.0, 0.0, s2, 0.0, t2[0], t2[1], 1.0];
+                unmoved(f, &a2_t).map_or_else(|| self.clone(), |f| Model::Fundamental { f })
             }
             Model::Affine { a } => Model::Affine {
                 a: [
-                    a[0],
-                    a[1],
-                    a[2] + o2[0] - a[0] * o1[0] - a[1] * o1[1],
-                    a[3],
-                    a[4],
-                    a[5] + o2[1] - a[3] * o1[0] - a[4] * o1[1],
+                    a[0] * s1 / s2,
+                    a[1] * s1 / s2,
+                    (a[2] - t2[0] + a[0] * t1[0] + a[1] * t1[1]) / s2,
+                    a[3] * s1 / s2,
+                    a[4] * s1 / s2,
+                    (a[5] - t2[1] + a[3] * t1[0] + a[4] * t1[1]) / s2,
                 ],
             },
             other => other.clone(),
@@ -562,6 +552,11 @@ mod tests {
         ]
     }
 
+    /// The moves of views shifted by −o1 and −o2.
+    fn shifted_back(o1: [f64; 2], o2: [f64; 2]) -> [ViewMove; 2] {
+        [(1.0, [-o1[0], -o1[1]]), (1.0, [-o2[0], -o2[1]])]
+    }
+
     #[test]
     fn models_fitted_on_shifted_views_fit_the_views_as_sent() {
         // Correspondences 3e7 px from the origin in both views: fitted as sent, a homography
@@ -592,7 +587,7 @@ mod tests {
             let rows: Vec<Vec<f64>> = pairs.iter().map(|p| p.to_vec()).collect();
             let refs: Vec<&[f64]> = rows.iter().map(Vec::as_slice).collect();
             let fitted = fit_type(truth.type_name(), &refs).unwrap().model;
-            let back = fitted.views_unshifted(o1, o2);
+            let back = fitted.views_unmoved(shifted_back(o1, o2));
             for p in &pairs {
                 let sent = [p[0] + o1[0], p[1] + o1[1], p[2] + o2[0], p[3] + o2[1]];
                 // Measured at 3e7 px, the residual carries the rounding of a map that far out
@@ -605,7 +600,7 @@ mod tests {
         let f_shifted = [0.0, -1e-3, 0.2, 1e-3, 0.0, -0.3, -0.2, 0.3, 0.0];
         let (o1, o2) = ([1000.0, -2000.0], [300.0, 700.0]);
         let Model::Fundamental { f } =
-            (Model::Fundamental { f: f_shifted }).views_unshifted(o1, o2)
+            (Model::Fundamental { f: f_shifted }).views_unmoved(shifted_back(o1, o2))
         else {
             panic!("not a fundamental matrix");
         };
@@ -656,7 +651,7 @@ mod tests {
             let rows: Vec<Vec<f64>> = pairs.iter().map(|&p| moved(p).to_vec()).collect();
             let refs: Vec<&[f64]> = rows.iter().map(Vec::as_slice).collect();
             let fitted = fit_type(truth.type_name(), &refs).unwrap().model;
-            let back = fitted.second_view_unmoved(s, t);
+            let back = fitted.views_unmoved([UNMOVED, (s, t)]);
             for p in &pairs {
                 let r = back.residual(p);
                 assert!(r < 1e-6, "{}: {r}", truth.type_name());
@@ -664,7 +659,7 @@ mod tests {
         }
         // F' of the moved view, F = Aᵀ·F' of the view as sent: x₂ᵀ·F·x₁ = x₂'ᵀ·F'·x₁ = 0.
         let f_moved = [0.0, -1e-3, 0.2, 1e-3, 0.0, -0.3, -0.2, 0.3, 0.0];
-        let back = Model::Fundamental { f: f_moved }.second_view_unmoved(s, t);
+        let back = Model::Fundamental { f: f_moved }.views_unmoved([UNMOVED, (s, t)]);
         let Model::Fundamental { f } = back else {
             panic!("not a fundamental matrix");
         };
@@ -693,7 +688,7 @@ mod tests {
             b: 0.8,
             c: -3.0,
         };
-        assert_eq!(line.second_view_unmoved(s, t), line);
+        assert_eq!(line.views_unmoved([UNMOVED, (s, t)]), line);
     }
 
     #[test]

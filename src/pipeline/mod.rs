@@ -39,7 +39,7 @@ use crate::data::screen::{self, Screened, screen};
 use crate::data::symmetry::closure;
 use crate::data::{ImageSize, Kind, Normalization, PointSet, Symmetry};
 use crate::data::{density, frames};
-use crate::geometry;
+use crate::geometry::{self, UNMOVED};
 use crate::refine::{self, RefineParams, Refined, Structure};
 use crate::registry::{LoadedModel, Observed};
 
@@ -743,30 +743,31 @@ fn fit_sent(
             .extend(lost_marks(points).filter(|_| !masked));
         Ok(outcome)
     };
-    // Two images of two sizes: the fit runs with the second view in the first image's frame
-    // (where the network reads it, and where refinement weighs both views' pixels alike), and
-    // the structures come back in each image's own pixels. Anything else, or a move out of the
-    // accepted range (which the API refuses), is fitted as sent.
-    let Some(size) = image else {
-        // Far from the origin, a homography in the caller's pixels is too ill-conditioned to
-        // invert: the fit runs with each view moved to its centroid.
-        let Some((o1, o2, moved)) = views_centred(points) else {
-            return as_sent();
-        };
-        let mut outcome = fit_counting(model, &moved, None, options, "points", None)?;
-        for s in &mut outcome.structures {
-            s.model = s.model.views_unshifted(o1, o2);
-        }
-        return Ok(outcome);
+    // Correspondences may be fitted with their views moved, and the structures come back in
+    // the caller's pixels:
+    // - two images of two sizes: the second view in the first image's frame (where the network
+    //   reads it, and where refinement weighs both views' pixels alike); a move out of the
+    //   accepted range (which the API refuses) is fitted as sent;
+    // - no image, far from the origin: each view at its centroid (a homography in the caller's
+    //   pixels that far out is too ill-conditioned to invert).
+    let moved = match image {
+        Some(size) => match (size.second_view_move(), size.in_first_frame(points)) {
+            (Some(second), (Cow::Owned(moved), first)) => {
+                Some(([UNMOVED, second], moved, Some(first)))
+            }
+            _ => None,
+        },
+        None => views_centred(points).map(|(o1, o2, moved)| {
+            let back = |o: [f64; 2]| (1.0, [-o[0], -o[1]]);
+            ([back(o1), back(o2)], moved, None)
+        }),
     };
-    let (Some((scale, shift)), (Cow::Owned(moved), first)) =
-        (size.second_view_move(), size.in_first_frame(points))
-    else {
+    let Some((moves, moved, fitted_in)) = moved else {
         return as_sent();
     };
-    let mut outcome = fit_counting(model, &moved, Some(first), options, "points", None)?;
+    let mut outcome = fit_counting(model, &moved, fitted_in, options, "points", None)?;
     for s in &mut outcome.structures {
-        s.model = s.model.second_view_unmoved(scale, shift);
+        s.model = s.model.views_unmoved(moves);
     }
     // Each image's span, in its own pixels.
     outcome.warnings.extend(image_warnings(points, image));
@@ -1491,7 +1492,11 @@ pub(crate) mod tests {
         assert_eq!(far.labels, centred.labels);
         assert!(!far.structures.is_empty());
         for (f, c) in far.structures.iter().zip(&centred.structures) {
-            assert_eq!(f.model, c.model.views_unshifted(o1, o2));
+            assert_eq!(
+                f.model,
+                c.model
+                    .views_unmoved([o1, o2].map(|o| (1.0, [-o[0], -o[1]])))
+            );
             assert_eq!((f.inliers, f.rms), (c.inliers, c.rms));
         }
     }

@@ -101,12 +101,6 @@ fn score(
     let clustering = pipeline::cluster(model, embedding, &params)?;
     let score = match (&s.refine, truth) {
         (_, Some(truth)) => truth,
-        (None, None) if embedding.erratic.is_empty() => Score {
-            k: clustering.k,
-            error: error_rate(&sample.labels, &clustering.labels),
-            nmi: nmi(&sample.labels, &clustering.labels),
-            outliers: None,
-        },
         // Tracks set apart as erratic are answered -1, as a fit answers them by default.
         (None, None) => {
             let mut labels: Vec<i64> = clustering.labels.iter().map(|&l| l as i64).collect();
